@@ -1,0 +1,242 @@
+"""YAML reading that remembers line numbers, and a small typed field reader.
+
+Every user-facing loader (catalogue, scenario) goes through :class:`Fields`, so that every
+error names the file, the line, the key path and what was expected.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .exceptions import InputError
+
+_MISSING = object()
+
+
+class _Map(dict):
+    """A mapping that knows the line of each of its keys (1-based)."""
+
+    line: int = 0
+    key_lines: dict[str, int]
+
+
+class _Seq(list):
+    line: int = 0
+    item_lines: list[int]
+
+
+class _LineLoader(yaml.SafeLoader):
+    pass
+
+
+def _construct_map(loader: _LineLoader, node: yaml.MappingNode) -> _Map:
+    out = _Map()
+    out.line = node.start_mark.line + 1
+    out.key_lines = {}
+    loader.flatten_mapping(node)
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        if key in out:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark
+            )
+        out[key] = loader.construct_object(value_node, deep=True)
+        out.key_lines[key] = key_node.start_mark.line + 1
+    return out
+
+
+def _construct_seq(loader: _LineLoader, node: yaml.SequenceNode) -> _Seq:
+    out = _Seq(loader.construct_object(child, deep=True) for child in node.value)
+    out.line = node.start_mark.line + 1
+    out.item_lines = [child.start_mark.line + 1 for child in node.value]
+    return out
+
+
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
+
+
+def load_yaml(path: Path, error: type[InputError]) -> Fields:
+    """Parse a YAML file whose top level is a mapping; return its :class:`Fields`."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise error(f"{path}: cannot read file: {exc.strerror or exc}") from None
+    try:
+        data = yaml.load(text, Loader=_LineLoader)  # noqa: S506 (SafeLoader subclass)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise error(f"{where}: malformed YAML: {problem}") from None
+    if not isinstance(data, _Map):
+        raise error(f"{path}:1: expected a mapping at the top level, got {_kind(data)}")
+    return Fields(data, path, "", error)
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "nothing"
+    if isinstance(value, bool):
+        return f"a boolean ({value})"
+    if isinstance(value, (int, float)):
+        return f"the number {value}"
+    if isinstance(value, str):
+        return f"the string {value!r}"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "a mapping"
+    return type(value).__name__
+
+
+class Fields:
+    """Typed access to one YAML mapping; records which keys were read.
+
+    Call :meth:`done` after reading, so that unknown (e.g. misspelt) keys are errors.
+    """
+
+    def __init__(self, data: _Map, path: Path, prefix: str, error: type[InputError]):
+        self._data = data
+        self.path = Path(path)
+        self._prefix = prefix
+        self._error = error
+        self._read: set[str] = set()
+
+    # -- error reporting -------------------------------------------------------------------
+    def key_path(self, key: str | int | None = None) -> str:
+        if key is None:
+            return self._prefix or "(top level)"
+        if isinstance(key, int):
+            return f"{self._prefix}[{key}]"
+        return f"{self._prefix}.{key}" if self._prefix else str(key)
+
+    def line_of(self, key: str | None = None) -> int:
+        if key is not None and key in self._data.key_lines:
+            return self._data.key_lines[key]
+        return self._data.line
+
+    def fail(self, key: str | None, message: str) -> InputError:
+        """Build (not raise) the error for ``key``: ``file:line: key.path: message``."""
+        return self._error(f"{self.path}:{self.line_of(key)}: {self.key_path(key)}: {message}")
+
+    # -- typed getters ---------------------------------------------------------------------
+    def has(self, key: str) -> bool:
+        return key in self._data
+
+    def raw(self, key: str, default: Any = _MISSING) -> Any:
+        self._read.add(key)
+        if key not in self._data:
+            if default is _MISSING:
+                raise self._error(
+                    f"{self.path}:{self._data.line}: {self.key_path(key)}: missing required key"
+                )
+            return default
+        return self._data[key]
+
+    def string(self, key: str, default: Any = _MISSING, choices: tuple[str, ...] = ()) -> str:
+        value = self.raw(key, default)
+        if value is default and default is not _MISSING:
+            return value
+        if not isinstance(value, str) or not value:
+            raise self.fail(key, f"expected a non-empty string, got {_kind(value)}")
+        if choices and value not in choices:
+            raise self.fail(key, f"expected one of {', '.join(choices)}; got {value!r}")
+        return value
+
+    def number(
+        self,
+        key: str,
+        default: Any = _MISSING,
+        *,
+        minimum: float | None = None,
+        exclusive_minimum: float | None = None,
+    ) -> float:
+        value = self.raw(key, default)
+        if value is default and default is not _MISSING:
+            return value
+        return self._check_number(key, value, minimum, exclusive_minimum)
+
+    def integer(self, key: str, default: Any = _MISSING, *, minimum: int | None = None) -> int:
+        value = self.raw(key, default)
+        if value is default and default is not _MISSING:
+            return value
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(key, f"expected an integer, got {_kind(value)}")
+        if minimum is not None and value < minimum:
+            raise self.fail(key, f"expected an integer >= {minimum}, got {value}")
+        return value
+
+    def boolean(self, key: str, default: Any = _MISSING) -> bool:
+        value = self.raw(key, default)
+        if not isinstance(value, bool):
+            raise self.fail(key, f"expected true or false, got {_kind(value)}")
+        return value
+
+    def vector(self, key: str, size: int, default: Any = _MISSING) -> tuple[float, ...]:
+        value = self.raw(key, default)
+        if value is default and default is not _MISSING:
+            return value
+        if not isinstance(value, list) or len(value) != size:
+            raise self.fail(key, f"expected a list of {size} numbers, got {_kind(value)}")
+        return tuple(self._check_number(key, v, None, None, f"item {i}: ") for i, v in enumerate(value))
+
+    def interval(self, key: str, default: Any = _MISSING) -> tuple[float, float]:
+        """A ``[low, high]`` pair with low <= high."""
+        low, high = self.vector(key, 2, default)
+        if low > high:
+            raise self.fail(key, f"expected [low, high] with low <= high, got [{low:g}, {high:g}]")
+        return low, high
+
+    def mapping(self, key: str, default: Any = _MISSING) -> Fields | None:
+        value = self.raw(key, default)
+        if value is default and default is not _MISSING:
+            return value
+        if not isinstance(value, _Map):
+            raise self.fail(key, f"expected a mapping, got {_kind(value)}")
+        return Fields(value, self.path, self.key_path(key), self._error)
+
+    def mappings(self, key: str, default: Any = _MISSING) -> Iterator[Fields]:
+        """Each item of a list of mappings, as :class:`Fields` named ``key[i]``."""
+        value = self.raw(key, default)
+        if value is default and default is not _MISSING:
+            return
+        if not isinstance(value, _Seq):
+            raise self.fail(key, f"expected a list, got {_kind(value)}")
+        for i, item in enumerate(value):
+            if not isinstance(item, _Map):
+                raise self._error(
+                    f"{self.path}:{value.item_lines[i]}: {self.key_path(key)}[{i}]: "
+                    f"expected a mapping, got {_kind(item)}"
+                )
+            yield Fields(item, self.path, f"{self.key_path(key)}[{i}]", self._error)
+
+    def done(self) -> None:
+        """Raise for the first key that no getter read (an unknown or misspelt key)."""
+        for key in self._data:
+            if key not in self._read:
+                expected = ", ".join(sorted(str(k) for k in self._read))
+                raise self.fail(key, f"unknown key (expected one of: {expected})")
+
+    def check(self, key: str, ok: bool, message: str) -> None:
+        if not ok:
+            raise self.fail(key, message)
+
+    def _check_number(self, key, value, minimum, exclusive_minimum, what: str = "") -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(key, f"{what}expected a number, got {_kind(value)}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise self.fail(key, f"{what}expected a finite number, got {value}")
+        if minimum is not None and value < minimum:
+            raise self.fail(key, f"{what}expected a number >= {minimum:g}, got {value:g}")
+        if exclusive_minimum is not None and value <= exclusive_minimum:
+            raise self.fail(key, f"{what}expected a number > {exclusive_minimum:g}, got {value:g}")
+        return value
+
+

@@ -1,0 +1,231 @@
+"""Module catalogue: the modules a robot can be built from and the grammar that joins them.
+
+Geometry follows SPEC §3, convention A. Every module maps its input frame to its output frame as
+
+    Rx(twist_in) · M(q) · Tz(length) · Rx(twist_out)
+
+where ``M(q)`` is ``Rz(q)`` for a revolute module, ``Tz(q)`` for a prismatic one and the
+identity for a fixed one; each factor acts on the current frame. Units: metres, kilograms,
+radians (the YAML states twists in degrees, as ``twist_in_deg``/``twist_out_deg``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Literal
+
+from ._yamlio import Fields, load_yaml
+from .exceptions import CatalogError
+
+__all__ = ["JointLimits", "Module", "Grammar", "Catalog", "load_catalog"]
+
+Kind = Literal["base", "joint", "link", "effector"]
+JointType = Literal["fixed", "revolute", "prismatic"]
+KINDS: tuple[str, ...] = ("base", "joint", "link", "effector")
+COLLISION_SHAPES: tuple[str, ...] = ("sphere", "capsule", "none")
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Limits of a movable module: position interval, |velocity| and |effort| bounds.
+
+    Revolute: rad, rad/s, N m. Prismatic: m, m/s, N.
+    """
+
+    lower: float
+    upper: float
+    velocity: float
+    effort: float
+
+
+@dataclass(frozen=True)
+class Module:
+    """One catalogue module. ``inertia`` is (ixx, iyy, izz, ixy, ixz, iyz) about ``com``,
+    both in the module's body frame (the frame after ``Rx(twist_in) · M(q)``)."""
+
+    id: str
+    kind: Kind
+    joint: JointType
+    length: float
+    diameter: float
+    mass: float
+    com: tuple[float, float, float]
+    inertia: tuple[float, float, float, float, float, float]
+    twist_in: float = 0.0
+    twist_out: float = 0.0
+    limits: JointLimits | None = None
+    armature: float = 0.0
+    collision: str = "sphere"
+
+    @property
+    def dof(self) -> int:
+        return 0 if self.joint == "fixed" else 1
+
+    @property
+    def radius(self) -> float:
+        return self.diameter / 2.0
+
+
+@dataclass(frozen=True)
+class Grammar:
+    """Allowed compositions: ``B L{links_after_base} (J L{links_after_joint})* E``, with the
+    total DOF (joints plus the effector's) in ``dof``. Ranges are inclusive ``(min, max)``."""
+
+    dof: tuple[int, int]
+    links_after_joint: tuple[int, int] = (1, 1)
+    links_after_base: tuple[int, int] = (0, 0)
+
+
+@dataclass(frozen=True)
+class Catalog:
+    """A named set of modules and their grammar. Hashable, so models can be cached on it."""
+
+    name: str
+    modules: tuple[Module, ...]
+    grammar: Grammar
+    source: str = field(default="", compare=False)
+
+    @cached_property
+    def _by_id(self) -> dict[str, Module]:
+        return {m.id: m for m in self.modules}
+
+    def module(self, module_id: str) -> Module:
+        try:
+            return self._by_id[module_id]
+        except KeyError:
+            raise CatalogError(
+                f"unknown module {module_id!r} in catalogue {self.name!r} "
+                f"(known: {', '.join(self._by_id)})"
+            ) from None
+
+    def of_kind(self, kind: Kind) -> tuple[Module, ...]:
+        return tuple(m for m in self.modules if m.kind == kind)
+
+
+def solid_cylinder_inertia(mass: float, diameter: float, length: float) -> tuple[float, ...]:
+    """Inertia of a solid cylinder along z about its centre: (ixx, iyy, izz, 0, 0, 0)."""
+    r2 = (diameter / 2.0) ** 2
+    transverse = mass * (3.0 * r2 + length**2) / 12.0
+    return (transverse, transverse, mass * r2 / 2.0, 0.0, 0.0, 0.0)
+
+
+def load_catalog(path: str | Path) -> Catalog:
+    """Read and validate a catalogue YAML file.
+
+    Raises
+    ------
+    CatalogError
+        Naming the file, line and key, and what was expected.
+    """
+    top = load_yaml(Path(path), CatalogError)
+    name = top.string("name")
+    top.string("description", default="")
+    modules: list[Module] = []
+    seen: dict[str, int] = {}
+    for fields in top.mappings("modules"):
+        module = _read_module(fields)
+        if module.id in seen:
+            raise fields.fail("id", f"duplicate module id {module.id!r} (first at modules[{seen[module.id]}])")
+        seen[module.id] = len(modules)
+        modules.append(module)
+    grammar = _read_grammar(top.mapping("grammar"))
+    top.done()
+    for kind in KINDS:
+        if kind != "link" and not any(m.kind == kind for m in modules):
+            raise top.fail("modules", f"expected at least one module of kind {kind!r}")
+    if grammar.links_after_joint[1] > 0 or grammar.links_after_base[1] > 0:
+        if not any(m.kind == "link" for m in modules):
+            raise top.fail("grammar", "the grammar asks for links but no module is of kind 'link'")
+    return Catalog(name=name, modules=tuple(modules), grammar=grammar, source=str(path))
+
+
+def _read_grammar(fields: Fields) -> Grammar:
+    dof = _int_range(fields, "dof")
+    after_joint = _int_range(fields, "links_after_joint", (1, 1))
+    after_base = _int_range(fields, "links_after_base", (0, 0))
+    fields.done()
+    return Grammar(dof=dof, links_after_joint=after_joint, links_after_base=after_base)
+
+
+def _int_range(fields: Fields, key: str, default=None) -> tuple[int, int]:
+    if default is not None and not fields.has(key):
+        fields.raw(key, None)
+        return default
+    low, high = fields.interval(key)
+    fields.check(
+        key,
+        low >= 0 and low == int(low) and high == int(high),
+        f"expected [min, max] of whole numbers >= 0, got [{low:g}, {high:g}]",
+    )
+    return int(low), int(high)
+
+
+def _read_module(f: Fields) -> Module:
+    module_id = f.string("id")
+    f.check("id", module_id.replace("_", "").isalnum(), f"expected letters, digits or '_', got {module_id!r}")
+    kind = f.string("kind", choices=KINDS)
+    movable = ("revolute", "prismatic")
+    if kind == "joint":
+        joint = f.string("joint", choices=movable)
+    elif kind == "effector":
+        joint = f.string("joint", choices=("fixed",) + movable)
+    else:
+        joint = "fixed"
+        f.check("joint", not f.has("joint"), f"a {kind} module has no joint; remove the key")
+    length = f.number("length", default=0.0, minimum=0.0)
+    diameter = f.number("diameter", exclusive_minimum=0.0)
+    if kind == "base":
+        mass = f.number("mass", default=0.0, minimum=0.0)
+    else:
+        mass = f.number("mass", exclusive_minimum=0.0)
+    com, inertia = _read_inertia(f, mass, diameter, length)
+    limits = None
+    if joint != "fixed":
+        limits = _read_limits(f.mapping("limits"), joint)
+    else:
+        f.check("limits", not f.has("limits"), "a module without a joint has no limits; remove the key")
+    armature = f.number("armature", default=0.0, minimum=0.0)
+    collision = f.string("collision", default="capsule" if kind == "link" else "sphere", choices=COLLISION_SHAPES)
+    twist_in = math.radians(f.number("twist_in_deg", default=0.0))
+    twist_out = math.radians(f.number("twist_out_deg", default=0.0))
+    f.done()
+    return Module(
+        id=module_id, kind=kind, joint=joint, length=length, diameter=diameter, mass=mass,
+        com=com, inertia=inertia, twist_in=twist_in, twist_out=twist_out, limits=limits,
+        armature=armature, collision=collision,
+    )
+
+
+def _read_inertia(f: Fields, mass: float, diameter: float, length: float):
+    if mass == 0.0 and not f.has("inertia"):
+        f.check("com", not f.has("com"), "a massless module has no centre of mass; remove the key")
+        return (0.0, 0.0, 0.0), (0.0,) * 6
+    value = f.raw("inertia")
+    if value == "solid_cylinder":
+        f.check("com", not f.has("com"), "a solid_cylinder's centre of mass is its centre; remove the key")
+        return (0.0, 0.0, length / 2.0), solid_cylinder_inertia(mass, diameter, length)
+    com = f.vector("com", 3)
+    if isinstance(value, list) and len(value) in (3, 6):
+        moments = f.vector("inertia", len(value))
+    else:
+        raise f.fail(
+            "inertia",
+            "expected solid_cylinder, [ixx, iyy, izz] or [ixx, iyy, izz, ixy, ixz, iyz] in kg m^2",
+        )
+    moments = tuple(moments) + (0.0,) * (6 - len(moments))
+    ixx, iyy, izz = moments[:3]
+    valid = min(ixx, iyy, izz) > 0 and ixx + iyy >= izz and iyy + izz >= ixx and izz + ixx >= iyy
+    f.check("inertia", valid, f"expected positive principal moments that satisfy the triangle inequality, got {list(moments[:3])}")
+    return com, moments
+
+
+def _read_limits(f: Fields, joint: str) -> JointLimits:
+    lower, upper = f.interval("position")
+    f.check("position", lower < upper, f"expected [lower, upper] with lower < upper, got [{lower:g}, {upper:g}]")
+    velocity = f.number("velocity", exclusive_minimum=0.0)
+    effort = f.number("effort", exclusive_minimum=0.0)
+    f.done()
+    return JointLimits(lower=lower, upper=upper, velocity=velocity, effort=effort)

@@ -1,0 +1,149 @@
+"""Step A: compositions of catalogue modules, enumerated from the catalogue's grammar.
+
+The grammar is data (:class:`~modular_robots.catalog.Grammar`)::
+
+    base  link{links_after_base}  (joint link{links_after_joint})*  effector
+
+with the total DOF in ``grammar.dof``. Enumeration is a generator: each composition once, in a
+deterministic order (DOF ascending, then base, effector and the
+chain in catalogue order), in bounded memory.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from .catalog import Catalog, Module
+from .exceptions import CatalogError, CompositionError
+
+__all__ = ["Composition", "enumerate_compositions", "count_compositions"]
+
+SEPARATOR = "-"
+
+
+@dataclass(frozen=True, order=True)
+class Composition:
+    """A serial chain of module ids, base first, effector last, e.g. ``B-J1-L2-E1``."""
+
+    modules: tuple[str, ...]
+    dof: int
+
+    @property
+    def name(self) -> str:
+        return SEPARATOR.join(self.modules)
+
+    def __str__(self) -> str:
+        return self.name
+
+    @classmethod
+    def from_name(cls, name: str, catalog: Catalog) -> Composition:
+        """Parse ``name`` (ids joined by ``-``) and check it against the catalogue's grammar.
+
+        Raises
+        ------
+        CompositionError
+            For an unknown module or a sequence the grammar does not allow, saying which.
+        """
+        ids = tuple(part.strip() for part in str(name).split(SEPARATOR))
+        if not name or any(not part for part in ids):
+            raise CompositionError(f"composition {name!r}: expected module ids joined by '-', e.g. B-J1-L2-E1")
+        modules = []
+        for position, module_id in enumerate(ids):
+            try:
+                modules.append(catalog.module(module_id))
+            except CatalogError as exc:
+                raise CompositionError(f"composition {name!r}, position {position + 1}: {exc}") from None
+        _check_grammar(name, modules, catalog)
+        return cls(ids, sum(m.dof for m in modules))
+
+
+def _check_grammar(name: str, modules: list[Module], catalog: Catalog) -> None:
+    g = catalog.grammar
+
+    def fail(message: str) -> CompositionError:
+        return CompositionError(f"composition {name!r}: {message} (catalogue {catalog.name!r})")
+
+    if modules[0].kind != "base":
+        raise fail(f"must start with a base module, not {modules[0].id} ({modules[0].kind})")
+    if len(modules) < 2 or modules[-1].kind != "effector":
+        raise fail(f"must end with an effector module, not {modules[-1].id} ({modules[-1].kind})")
+    run, after = 0, "base"
+    for position, module in enumerate(modules[1:-1], start=2):
+        if module.kind == "link":
+            run += 1
+            continue
+        if module.kind != "joint":
+            raise fail(f"position {position}: {module.id} ({module.kind}) may only be first or last")
+        _check_run(fail, run, after, g)
+        run, after = 0, "joint"
+    _check_run(fail, run, after, g)
+    dof = sum(m.dof for m in modules)
+    if not g.dof[0] <= dof <= g.dof[1]:
+        raise fail(f"has {dof} DOF; the grammar allows {g.dof[0]} to {g.dof[1]}")
+
+
+def _check_run(fail, run: int, after: str, g) -> None:
+    low, high = g.links_after_joint if after == "joint" else g.links_after_base
+    if not low <= run <= high:
+        raise fail(f"{run} link(s) after a {after}; the grammar allows {low} to {high}")
+
+
+def _link_runs(links: tuple[Module, ...], bounds: tuple[int, int]) -> list[tuple[str, ...]]:
+    ids = [m.id for m in links]
+    return [run for k in range(bounds[0], bounds[1] + 1) for run in itertools.product(ids, repeat=k)]
+
+
+def enumerate_compositions(catalog: Catalog, dof: int | None = None) -> Iterator[Composition]:
+    """Yield every composition the grammar allows, once each, DOF ascending.
+
+    Parameters
+    ----------
+    catalog
+        The module catalogue and its grammar.
+    dof
+        Only compositions with exactly this many DOF (default: the grammar's whole range).
+    """
+    g = catalog.grammar
+    joints = catalog.of_kind("joint")
+    blocks = [(j.id, *run) for j in joints for run in _link_runs(catalog.of_kind("link"), g.links_after_joint)]
+    base_runs = _link_runs(catalog.of_kind("link"), g.links_after_base)
+    for total in _dof_range(catalog, dof):
+        for base in catalog.of_kind("base"):
+            for pre in base_runs:
+                for effector in catalog.of_kind("effector"):
+                    n_joints = total - base.dof - effector.dof
+                    if n_joints < 0:
+                        continue
+                    for chain in itertools.product(blocks, repeat=n_joints):
+                        ids = (base.id, *pre, *itertools.chain.from_iterable(chain), effector.id)
+                        yield Composition(ids, total)
+
+
+def count_compositions(catalog: Catalog, dof: int | None = None) -> dict[int, int]:
+    """Number of compositions per DOF (only ``dof`` if given), in closed form: nothing is
+    enumerated."""
+    g = catalog.grammar
+    n_links = len(catalog.of_kind("link"))
+    per_run = sum(n_links**k for k in range(g.links_after_joint[0], g.links_after_joint[1] + 1))
+    per_base = sum(n_links**k for k in range(g.links_after_base[0], g.links_after_base[1] + 1))
+    per_block = len(catalog.of_kind("joint")) * per_run
+    counts = {}
+    for total in _dof_range(catalog, dof):
+        counts[total] = sum(
+            per_base * per_block ** (total - b.dof - e.dof)
+            for b in catalog.of_kind("base")
+            for e in catalog.of_kind("effector")
+            if total - b.dof - e.dof >= 0
+        )
+    return counts
+
+
+def _dof_range(catalog: Catalog, dof: int | None) -> range:
+    low, high = catalog.grammar.dof
+    if dof is None:
+        return range(low, high + 1)
+    if not low <= dof <= high:
+        raise CompositionError(f"--dof {dof}: the catalogue {catalog.name!r} allows {low} to {high} DOF")
+    return range(dof, dof + 1)

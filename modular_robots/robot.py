@@ -1,0 +1,204 @@
+"""Robot models: a Pinocchio model of a composition (or of any URDF), with its tool frame,
+joint limits, collision primitives and dynamics.
+
+Collision primitives are segments with a radius, attached to a frame: a capsule of length
+``length`` along the frame's z axis starting at ``offset``; a sphere is a segment of zero length.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import pinocchio as pin
+
+from .catalog import Catalog
+from .composition import Composition
+from .urdf import PAYLOAD_RADIUS, composition_urdf, link_name
+
+__all__ = ["Primitive", "RobotModel", "robot_model"]
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A capsule (``length > 0``) or sphere (``length == 0``) of ``radius`` [m] on ``frame``.
+
+    Its axis runs from ``(0, 0, offset)`` to ``(0, 0, offset + length)`` in the frame.
+    ``module`` is the index of the module it belongs to in the chain (-1: not a module).
+    """
+
+    name: str
+    frame: str
+    radius: float
+    length: float = 0.0
+    offset: float = 0.0
+    module: int = -1
+
+
+class RobotModel:
+    """A Pinocchio model with a tool frame and collision primitives.
+
+    Parameters
+    ----------
+    model
+        The Pinocchio model (its joint limits are the robot's limits).
+    tool_frame
+        Name of the frame whose origin is the tool point (``tool0`` for compositions).
+    primitives
+        Collision primitives, in chain order.
+    name
+        A name for messages and files.
+    urdf
+        The URDF text the model was built from, if any (kept to export it).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        tool_frame: str = "tool0",
+        primitives: Sequence[Primitive] = (),
+        name: str = "",
+        urdf: str | None = None,
+    ):
+        self.model = model
+        self.data = model.createData()
+        self.name = name or model.name
+        self.urdf = urdf
+        if not model.existFrame(tool_frame):
+            raise ValueError(f"robot {self.name!r} has no frame {tool_frame!r}")
+        self.tool_frame = tool_frame
+        self.tool_frame_id = model.getFrameId(tool_frame)
+        self.primitives = tuple(primitives)
+        for p in self.primitives:
+            if not model.existFrame(p.frame):
+                raise ValueError(f"primitive {p.name!r}: robot {self.name!r} has no frame {p.frame!r}")
+        self._primitive_frames = [int(model.getFrameId(p.frame)) for p in self.primitives]
+
+    # -- sizes and limits --------------------------------------------------------------------
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        return self.model.nv
+
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower position limits [rad or m]."""
+        return self.model.lowerPositionLimit.copy()
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper position limits [rad or m]."""
+        return self.model.upperPositionLimit.copy()
+
+    @property
+    def velocity_limit(self) -> np.ndarray:
+        """Symmetric velocity bounds [rad/s or m/s]."""
+        return self.model.velocityLimit.copy()
+
+    @property
+    def effort_limit(self) -> np.ndarray:
+        """Symmetric torque/force bounds [N m or N]."""
+        return self.model.effortLimit.copy()
+
+    @property
+    def total_mass(self) -> float:
+        """Mass of every body, payload included [kg]."""
+        return float(sum(inertia.mass for inertia in self.model.inertias))
+
+    # -- kinematics -----------------------------------------------------------------------
+    def tool_position(self, q: np.ndarray) -> np.ndarray:
+        """Position of the tool point in the base frame [m]."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        return self.data.oMf[self.tool_frame_id].translation.copy()
+
+    def tool_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """3 x nv Jacobian of :meth:`tool_position` (base-frame axes)."""
+        return pin.computeFrameJacobian(
+            self.model, self.data, np.asarray(q, dtype=float), self.tool_frame_id,
+            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
+        )[:3].copy()
+
+    def primitive_segments(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """End points ``(a, b)``, each ``(n_primitives, 3)``, of every primitive's axis in the
+        base frame; ``a == b`` for spheres."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        a = np.empty((len(self.primitives), 3))
+        b = np.empty_like(a)
+        for i, (p, fid) in enumerate(zip(self.primitives, self._primitive_frames)):
+            pose = self.data.oMf[fid]
+            axis = pose.rotation[:, 2]
+            a[i] = pose.translation + p.offset * axis
+            b[i] = a[i] + p.length * axis
+        return a, b
+
+    def primitive_placements(self, q: np.ndarray) -> list[pin.SE3]:
+        """Pose of each primitive's centre, z along its axis (the FCL convention)."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        out = []
+        for p, fid in zip(self.primitives, self._primitive_frames):
+            local = pin.SE3(np.eye(3), np.array([0.0, 0.0, p.offset + p.length / 2.0]))
+            out.append(self.data.oMf[fid] * local)
+        return out
+
+    # -- dynamics ---------------------------------------------------------------------------
+    def rnea(self, q, v, a) -> np.ndarray:
+        """Inverse dynamics: joint torques/forces [N m or N] for ``(q, v, a)``, gravity included."""
+        return pin.rnea(self.model, self.data, q, v, a).copy()
+
+    def aba(self, q, v, tau) -> np.ndarray:
+        """Forward dynamics: joint accelerations for ``(q, v, tau)``."""
+        return pin.aba(self.model, self.data, q, v, tau).copy()
+
+    def rnea_derivatives(self, q, v, a) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(dtau/dq, dtau/dv, dtau/da = M)`` at ``(q, v, a)``."""
+        dq, dv, da = pin.computeRNEADerivatives(self.model, self.data, q, v, a)
+        da = np.triu(da) + np.triu(da, 1).T
+        return dq.copy(), dv.copy(), da
+
+    def aba_derivatives(self, q, v, tau) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(dqdd/dq, dqdd/dv, dqdd/dtau = M^-1)`` at ``(q, v, tau)``."""
+        dq, dv, dtau = pin.computeABADerivatives(self.model, self.data, q, v, tau)
+        dtau = np.triu(dtau) + np.triu(dtau, 1).T
+        return dq.copy(), dv.copy(), dtau
+
+    def gravity(self, q) -> np.ndarray:
+        """Static joint torques/forces that hold ``q`` against gravity (payload included)."""
+        return pin.computeGeneralizedGravity(self.model, self.data, q).copy()
+
+    def mass_matrix(self, q) -> np.ndarray:
+        """Joint-space mass matrix ``M(q)`` (symmetric)."""
+        m = pin.crba(self.model, self.data, q)
+        return np.triu(m) + np.triu(m, 1).T
+
+
+def composition_primitives(composition: Composition, catalog: Catalog) -> list[Primitive]:
+    """Collision primitives of a composition: each module's catalogue shape, plus the payload."""
+    out = []
+    for index, module_id in enumerate(composition.modules):
+        module = catalog.module(module_id)
+        frame = link_name(index, module)
+        if module.collision == "sphere":
+            out.append(Primitive(f"{frame}_port", frame, module.radius, 0.0, module.length, index))
+        elif module.collision == "capsule":
+            out.append(Primitive(f"{frame}_capsule", frame, module.radius, module.length, 0.0, index))
+    out.append(Primitive("payload", "payload", PAYLOAD_RADIUS, 0.0, 0.0, len(composition.modules)))
+    return out
+
+
+@lru_cache(maxsize=256)
+def robot_model(composition: Composition, catalog: Catalog, payload: float = 0.0) -> RobotModel:
+    """The :class:`RobotModel` of ``composition`` carrying ``payload`` kg at ``tool0``.
+
+    Built from the generated URDF (nothing is written to disk) and cached per
+    ``(composition, catalog, payload)``; module armatures are applied to the model.
+    """
+    urdf = composition_urdf(composition, catalog, payload)
+    model = pin.buildModelFromXML(urdf)
+    joint_modules = [catalog.module(m) for m in composition.modules if catalog.module(m).dof]
+    model.armature = np.array([m.armature for m in joint_modules], dtype=float)
+    return RobotModel(model, "tool0", composition_primitives(composition, catalog), composition.name, urdf)

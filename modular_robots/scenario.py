@@ -1,0 +1,152 @@
+"""Scenario files: a task for a catalogue, with optimizer and pruning settings (SPEC §7)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ._yamlio import Fields, load_yaml
+from .catalog import Catalog, load_catalog
+from .collision import SphereObstacle
+from .exceptions import InputError, ScenarioError
+
+__all__ = ["Task", "OptimizerSettings", "PruningSettings", "Scenario", "load_scenario"]
+
+COSTS = ("time", "effort")
+RULES = ("ratio", "none")
+TRANSCRIPTIONS = ("forward", "inverse")
+
+
+@dataclass(frozen=True)
+class Task:
+    """Carry ``payload`` [kg] from tool position ``start`` to ``goal`` [m, base frame], at rest at
+    both ends, clear of ``obstacles``, minimising ``cost`` (``time`` or ``effort``)."""
+
+    payload: float
+    start: tuple[float, float, float]
+    goal: tuple[float, float, float]
+    obstacles: tuple[SphereObstacle, ...] = ()
+    cost: str = "time"
+    self_collision: bool = False
+
+
+@dataclass(frozen=True)
+class OptimizerSettings:
+    """Step C settings: shooting nodes (intervals = nodes - 1), RK4 sub-steps per interval,
+    trust-constr iteration limit and tolerances, and the transcription."""
+
+    nodes: int = 8
+    substeps: int = 4
+    max_iterations: int = 300
+    tolerance: float = 1e-6
+    constraint_tolerance: float = 1e-6
+    transcription: str = "forward"
+
+
+@dataclass(frozen=True)
+class PruningSettings:
+    """Step D settings: ``ratio`` prunes candidate k at iteration l >= ``start_iteration`` when
+    ``(c_k,l - c_min,l) / c_min,l > threshold``; ``none`` optimises every candidate."""
+
+    rule: str = "ratio"
+    threshold: float = 0.5
+    start_iteration: int = 2
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    catalog: Catalog
+    task: Task
+    optimizer: OptimizerSettings = field(default_factory=OptimizerSettings)
+    pruning: PruningSettings = field(default_factory=PruningSettings)
+    path: Path | None = None
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file; its ``catalog`` path is relative to the file.
+
+    Raises
+    ------
+    ScenarioError
+        Naming the file, line and key, and what was expected (catalogue errors propagate as
+        :class:`~modular_robots.exceptions.CatalogError`).
+    """
+    path = Path(path)
+    top = load_yaml(path, ScenarioError)
+    name = top.string("name")
+    top.string("description", default="")
+    catalog_path = path.parent / top.string("catalog")
+    if not catalog_path.is_file():
+        raise top.fail("catalog", f"no catalogue file at {catalog_path}")
+    catalog = load_catalog(catalog_path)
+    task = _read_task(top.mapping("task"))
+    optimizer = _read_optimizer(top.mapping("optimizer", default=None))
+    pruning = _read_pruning(top.mapping("pruning", default=None))
+    top.done()
+    return Scenario(name, catalog, task, optimizer, pruning, path)
+
+
+def _read_task(f: Fields) -> Task:
+    payload = f.number("payload", minimum=0.0)
+    start = f.vector("start", 3)
+    goal = f.vector("goal", 3)
+    obstacles = []
+    for item in f.mappings("obstacles", default=()):
+        sphere = item.mapping("sphere")
+        center = sphere.vector("center", 3)
+        radius = sphere.number("radius", exclusive_minimum=0.0)
+        sphere.done()
+        item.done()
+        if math.dist(center, (0.0, 0.0, 0.0)) <= radius:
+            raise item.fail("sphere", f"the obstacle contains the robot's base at the origin "
+                                      f"(centre {list(center)}, radius {radius:g})")
+        for label, point in (("start", start), ("goal", goal)):
+            if math.dist(center, point) <= radius:
+                raise item.fail("sphere", f"the obstacle contains the {label} position {list(point)}")
+        obstacles.append(SphereObstacle(center, radius))
+    cost = f.string("cost", default="time", choices=COSTS)
+    self_collision = f.boolean("self_collision", default=False)
+    f.done()
+    return Task(payload, start, goal, tuple(obstacles), cost, self_collision)
+
+
+def _read_optimizer(f: Fields | None) -> OptimizerSettings:
+    if f is None:
+        return OptimizerSettings()
+    d = OptimizerSettings()
+    settings = OptimizerSettings(
+        nodes=f.integer("nodes", default=d.nodes, minimum=2),
+        substeps=f.integer("substeps", default=d.substeps, minimum=1),
+        max_iterations=f.integer("max_iterations", default=d.max_iterations, minimum=1),
+        tolerance=f.number("tolerance", default=d.tolerance, exclusive_minimum=0.0),
+        constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance,
+                                      exclusive_minimum=0.0),
+        transcription=f.string("transcription", default=d.transcription, choices=TRANSCRIPTIONS),
+    )
+    f.done()
+    return settings
+
+
+def _read_pruning(f: Fields | None) -> PruningSettings:
+    if f is None:
+        return PruningSettings()
+    d = PruningSettings()
+    settings = PruningSettings(
+        rule=f.string("rule", default=d.rule, choices=RULES),
+        threshold=f.number("threshold", default=d.threshold, exclusive_minimum=0.0),
+        start_iteration=f.integer("start_iteration", default=d.start_iteration, minimum=1),
+    )
+    f.done()
+    return settings
+
+
+def load_scenario_or_catalog(path: str | Path) -> tuple[Scenario | None, Catalog]:
+    """For commands that take either: a scenario file (has ``task``) or a bare catalogue."""
+    path = Path(path)
+    top = load_yaml(path, InputError)
+    if top.has("task"):
+        scenario = load_scenario(path)
+        return scenario, scenario.catalog
+    return None, load_catalog(path)

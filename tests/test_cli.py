@@ -1,0 +1,43 @@
+"""The command line is a thin shell: check its output and its errors."""
+
+import pinocchio as pin
+from click.testing import CliRunner
+
+from modular_robots.cli import main
+
+from .conftest import PAPER_CATALOG, PAPER_SCENARIO
+
+
+def test_enumerate_count():
+    result = CliRunner().invoke(main, ["enumerate", str(PAPER_SCENARIO), "--count"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines() == ["dof  compositions", "2    12", "3    72", "4    432", "5    2592", "all  3108"]
+
+
+def test_enumerate_lists_names_of_one_dof():
+    result = CliRunner().invoke(main, ["enumerate", str(PAPER_CATALOG), "--dof", "2"])
+    assert result.exit_code == 0
+    names = result.output.split()
+    assert len(names) == 12 and names[0] == "B-J1-L1-E1" and names[-1] == "B-J2-L3-E2"
+
+
+def test_urdf_writes_a_loadable_file(tmp_path):
+    out = tmp_path / "w.urdf"
+    result = CliRunner().invoke(
+        main, ["urdf", "B-J1-L3-J1-L3-J1-L2-J1-L1-E1", "--scenario", str(PAPER_SCENARIO), "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert result.output == f"wrote {out} (5 joints, payload 50 kg)\n"
+    model = pin.buildModelFromUrdf(str(out))
+    assert model.nq == 5 and sum(i.mass for i in model.inertias) == 50.0 + 4 * 1.0 + 4 * 0.05 + 0.5
+
+
+def test_errors_are_one_line_without_traceback(tmp_path):
+    result = CliRunner().invoke(main, ["urdf", "B-J1-E1", "--scenario", str(PAPER_SCENARIO), "-o", str(tmp_path / "x.urdf")])
+    assert result.exit_code == 1
+    assert result.output == (
+        "Error: composition 'B-J1-E1': 0 link(s) after a joint; the grammar allows 1 to 1 (catalogue 'paper')\n"
+    )
+    assert not (tmp_path / "x.urdf").exists()
+    result = CliRunner().invoke(main, ["enumerate", str(PAPER_SCENARIO), "--count", "--dof", "9"])
+    assert result.exit_code == 1 and result.output == "Error: --dof 9: the catalogue 'paper' allows 2 to 5 DOF\n"

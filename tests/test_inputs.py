@@ -1,0 +1,156 @@
+"""Every bad catalogue or scenario gives an error naming the file, line, key and expectation."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from modular_robots import CatalogError, ScenarioError, load_catalog, load_scenario
+
+from .conftest import PAPER_CATALOG, PAPER_SCENARIO
+
+CATALOG_TEXT = PAPER_CATALOG.read_text()
+SCENARIO_TEXT = PAPER_SCENARIO.read_text()
+
+
+def _catalog(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in CATALOG_TEXT, old
+    path = tmp_path / "catalog.yaml"
+    path.write_text(CATALOG_TEXT.replace(old, new, 1))
+    return path
+
+
+def _line(text: str, needle: str) -> int:
+    return text[: text.index(needle)].count("\n") + 1
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "message"),
+    [
+        ("id: J2\n", "id: J9\n    colour: red\n", "modules[2].colour",
+         "unknown key (expected one of: armature, collision, com, diameter, id, inertia, joint, kind, length, limits, mass, twist_in_deg, twist_out_deg)"),
+        ("    mass: 0.9\n", "    mass: -1\n", "modules[2].mass", "expected a number > 0, got -1"),
+        ("    mass: 0.9\n", "    mass: heavy\n", "modules[2].mass", "expected a number, got the string 'heavy'"),
+        ("    mass: 0.9\n", "", "modules[2].mass", "missing required key"),
+        ("kind: joint\n    joint: prismatic", "kind: joint\n    joint: screw", "modules[2].joint",
+         "expected one of revolute, prismatic; got 'screw'"),
+        ("velocity: 5.0, effort: 90.0", "velocity: 5.0, effort: -90.0", "modules[2].limits.effort",
+         "expected a number > 0, got -90"),
+        ("position: [0.0, 0.2]", "position: [0.2, 0.0]", "modules[2].limits.position",
+         "expected [low, high] with low <= high, got [0.2, 0]"),
+        ("com: [0.0, 0.0, 0.1]", "com: [0.0, 0.1]", "modules[2].com", "expected a list of 3 numbers, got a list"),
+        ("dof: [2, 5]", "dof: [2, five]", "grammar.dof", "item 1: expected a number, got the string 'five'"),
+        ("id: L2\n", "id: L1\n", "modules[4].id", "duplicate module id 'L1' (first at modules[3])"),
+        ("inertia: [2.0e-3, 2.0e-3, 0.65e-3]\n    limits: {position: [0.0, 0.2]",
+         "inertia: [2.0e-3, 2.0e-3, 5.0e-3]\n    limits: {position: [0.0, 0.2]", "modules[2].inertia",
+         "expected positive principal moments that satisfy the triangle inequality, got [0.002, 0.002, 0.005]"),
+    ],
+    ids=["unknown-key", "negative-mass", "wrong-type", "missing-key", "bad-choice", "negative-effort",
+         "reversed-limits", "short-vector", "bad-grammar", "duplicate-id", "unphysical-inertia"],
+)
+def test_catalog_errors_name_file_line_key(tmp_path, old, new, key, message):
+    path = _catalog(tmp_path, old, new)
+    with pytest.raises(CatalogError) as info:
+        load_catalog(path)
+    text = path.read_text()
+    leaf = key.rsplit(".", 1)[-1].split("[")[0]
+    assert str(info.value).startswith(f"{path}:")
+    assert str(info.value).endswith(f": {key}: {message}")
+    line = int(str(info.value)[len(str(path)) + 1:].split(":")[0])
+    named = text.splitlines()[line - 1]
+    assert ("- id:" in named) if message == "missing required key" else (f"{leaf}:" in named), named
+
+
+def test_malformed_yaml_names_the_line(tmp_path):
+    path = _catalog(tmp_path, "    mass: 0.9\n", "    mass: [0.9\n")
+    with pytest.raises(CatalogError, match=rf"^{re.escape(str(path))}:\d+: malformed YAML: "):
+        load_catalog(path)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CatalogError, match=r"nope.yaml: cannot read file: No such file or directory"):
+        load_catalog(tmp_path / "nope.yaml")
+
+
+def test_top_level_must_be_a_mapping(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("- a\n- b\n")
+    with pytest.raises(CatalogError, match=r"c.yaml:1: expected a mapping at the top level, got a list$"):
+        load_catalog(path)
+
+
+def test_catalog_needs_every_kind(tmp_path):
+    text = CATALOG_TEXT.replace("kind: effector", "kind: joint")
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    with pytest.raises(CatalogError, match=r"modules: expected at least one module of kind 'effector'$"):
+        load_catalog(path)
+
+
+def test_paper_catalog_numbers(paper_catalog):
+    """The shipped catalogue carries SPEC §3's Table I exactly."""
+    j1, j2, l1, l3, e2 = (paper_catalog.module(m) for m in ("J1", "J2", "L1", "L3", "E2"))
+    assert (j1.length, j1.mass, j1.limits.velocity, j1.limits.effort) == (0.25, 1.0, 1.0, 100.0)
+    assert (j2.limits.lower, j2.limits.upper, j2.limits.effort, j2.com) == (0.0, 0.2, 90.0, (0.0, 0.0, 0.1))
+    assert (e2.mass, e2.limits.upper, e2.limits.effort, e2.com) == (0.75, 0.1, 85.0, (0.0, 0.0, 0.025))
+    assert l1.twist_in == pytest.approx(3.141592653589793 / 2) and l1.twist_out == 0.0
+    assert l3.twist_out == pytest.approx(-3.141592653589793 / 2) and l3.twist_in == 0.0
+    # solid cylinder, m = 0.05, r = 0.1, l = 0.75: (3 r^2 + l^2) m / 12 and m r^2 / 2
+    assert l1.inertia[:3] == pytest.approx((0.00246875, 0.00246875, 0.00025), rel=1e-12)
+    assert l1.com == (0.0, 0.0, 0.375)
+
+
+# -- scenarios ----------------------------------------------------------------------------------
+def _scenario(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in SCENARIO_TEXT, old
+    (tmp_path / "catalogs").mkdir(exist_ok=True)
+    (tmp_path / "catalogs" / "paper.yaml").write_text(CATALOG_TEXT)
+    path = tmp_path / "scenario.yaml"
+    path.write_text(SCENARIO_TEXT.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "needle", "message"),
+    [
+        ("start: [1.5, 1.5, 2.0]", "start: [.nan, 1.5, 2.0]", "start:", "task.start: item 0: expected a finite number, got nan"),
+        ("goal: [-2.0, -1.2, 0.6]", "goal: [-2.0, -1.2]", "goal:", "task.goal: expected a list of 3 numbers, got a list"),
+        ("payload: 50.0", "payload: -5", "payload:", "task.payload: expected a number >= 0, got -5"),
+        ("cost: time", "cost: energy", "cost:", "task.cost: expected one of time, effort; got 'energy'"),
+        ("  cost: time", "  cost: time\n  speed: 3", "speed:",
+         "task.speed: unknown key (expected one of: cost, goal, obstacles, payload, self_collision, start)"),
+        ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 2, got 1"),
+        ("threshold: 0.5", "threshold: half", "threshold:", "pruning.threshold: expected a number, got the string 'half'"),
+        ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, none; got 'greedy'"),
+        ("center: [1.5, -1.3, 1.1], radius: 0.30", "center: [0.1, 0.0, 0.0], radius: 0.30", "- sphere:",
+         "task.obstacles[0].sphere: the obstacle contains the robot's base at the origin (centre [0.1, 0.0, 0.0], radius 0.3)"),
+        ("center: [1.5, -1.3, 1.1], radius: 0.30", "center: [1.5, 1.5, 1.9], radius: 0.30", "- sphere:",
+         "task.obstacles[0].sphere: the obstacle contains the start position [1.5, 1.5, 2.0]"),
+        ("catalog: catalogs/paper.yaml", "catalog: catalogs/missing.yaml", "catalog:",
+         "catalog: no catalogue file at {dir}/catalogs/missing.yaml"),
+    ],
+    ids=["nan-target", "short-goal", "negative-payload", "unknown-cost", "unknown-key", "too-few-nodes",
+         "threshold-type", "unknown-rule", "obstacle-contains-base", "obstacle-contains-start", "missing-catalog"],
+)
+def test_scenario_errors_name_file_line_key(tmp_path, old, new, needle, message):
+    path = _scenario(tmp_path, old, new)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    line = _line(path.read_text(), needle)
+    assert str(info.value) == f"{path}:{line}: {message.format(dir=tmp_path)}"
+
+
+def test_catalogue_error_inside_a_scenario_names_the_catalogue(tmp_path):
+    path = _scenario(tmp_path, "name: paper", "name: paper")
+    (tmp_path / "catalogs" / "paper.yaml").write_text(CATALOG_TEXT.replace("mass: 0.9", "mass: -0.9"))
+    with pytest.raises(CatalogError, match=r"catalogs/paper.yaml:\d+: modules\[2\].mass: expected a number > 0, got -0.9$"):
+        load_scenario(path)
+
+
+def test_shipped_scenarios_load():
+    paper = load_scenario(PAPER_SCENARIO)
+    assert paper.task.payload == 50.0 and paper.task.start == (1.5, 1.5, 2.0) and paper.task.goal == (-2.0, -1.2, 0.6)
+    assert [(o.center, o.radius) for o in paper.task.obstacles] == [((1.5, -1.3, 1.1), 0.3), ((-1.2, 2.1, 0.8), 0.35)]
+    assert (paper.optimizer.nodes, paper.pruning.rule, paper.pruning.threshold, paper.pruning.start_iteration) == (8, "ratio", 0.5, 2)
+    five = load_scenario(PAPER_SCENARIO.with_name("paper-5kg.yaml"))
+    assert five.task.payload == 5.0 and five.task.obstacles == paper.task.obstacles and five.catalog == paper.catalog

@@ -1,0 +1,123 @@
+"""Generated URDF structure and FCL distances against hand-computed cases."""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import yourdfpy
+
+from modular_robots import CollisionModel, Composition, SphereObstacle, composition_urdf, robot_model
+
+WINNER = "B-J1-L3-J1-L3-J1-L2-J1-L1-E1"
+
+
+def test_paper_winner_urdf(paper_catalog, tmp_path):
+    """The issue's acceptance case: 5 movable joints with limits and a 50 kg payload body."""
+    composition = Composition.from_name(WINNER, paper_catalog)
+    path = tmp_path / "w.urdf"
+    path.write_text(composition_urdf(composition, paper_catalog, 50.0))
+    model = pin.buildModelFromUrdf(str(path))
+    assert model.name == WINNER and " " not in model.name and ":" not in model.name
+    assert model.nq == model.nv == 5
+    assert list(model.names)[1:] == [f"joint_{k}" for k in range(1, 6)]
+    assert np.allclose(model.lowerPositionLimit, -math.pi) and np.allclose(model.upperPositionLimit, math.pi)
+    assert np.allclose(model.velocityLimit, 1.0)
+    assert np.allclose(model.effortLimit, [100, 100, 100, 100, 95])
+    frames = [f.name for f in model.frames]
+    assert frames[1] == "base_link" and "tool0" in frames and "payload" in frames
+    # Pinocchio lumps fixed bodies into the last moving body: E1 (0.5 kg) plus the payload
+    assert model.inertias[5].mass == pytest.approx(50.5)
+    assert model.frames[model.getFrameId("payload")].parentJoint == 5
+    robot = yourdfpy.URDF.load(str(path), load_meshes=False)
+    assert robot.validate()
+    assert robot.link_map["payload"].inertial.mass == pytest.approx(50.0)
+    assert robot.base_link == "base_link"
+
+
+def test_prismatic_limits_and_armature(paper_catalog):
+    robot = robot_model(Composition.from_name("B-J2-L2-J1-L1-E2", paper_catalog), paper_catalog, 0.0)
+    assert list(robot.lower) == [0.0, -math.pi, 0.0] and list(robot.upper) == [0.2, math.pi, 0.1]
+    assert list(robot.velocity_limit) == [5.0, 1.0, 5.0] and list(robot.effort_limit) == [90.0, 100.0, 85.0]
+    assert list(robot.model.armature) == [0.0, 0.0, 0.0]
+
+
+def test_model_is_cached(paper_catalog):
+    composition = Composition.from_name("B-J1-L2-E1", paper_catalog)
+    assert robot_model(composition, paper_catalog, 5.0) is robot_model(composition, paper_catalog, 5.0)
+    assert robot_model(composition, paper_catalog, 5.0) is not robot_model(composition, paper_catalog, 6.0)
+
+
+def test_primitives_match_urdf_collision_geometry(paper_catalog, tmp_path):
+    """Capsule axes and port spheres from Pinocchio equal the URDF collision shapes posed by
+    yourdfpy's own forward kinematics."""
+    composition = Composition.from_name("B-J2-L1-J1-L3-J1-L2-E1", paper_catalog)
+    robot = robot_model(composition, paper_catalog, 5.0)
+    path = tmp_path / "r.urdf"
+    path.write_text(robot.urdf)
+    urdf = yourdfpy.URDF.load(str(path), load_meshes=False)
+    q = np.array([0.13, 0.7, -1.1, 0.4])
+    urdf.update_cfg(q)
+    a, b = robot.primitive_segments(q)
+    for i, primitive in enumerate(robot.primitives):
+        link = urdf.link_map[primitive.frame]
+        (collision,) = link.collisions
+        pose = urdf.get_transform(primitive.frame, "base_link") @ collision.origin
+        half = collision.geometry.cylinder.length / 2 if collision.geometry.cylinder else 0.0
+        radius = (collision.geometry.cylinder or collision.geometry.sphere).radius
+        assert radius == pytest.approx(primitive.radius)
+        np.testing.assert_allclose(a[i], pose[:3, 3] - half * pose[:3, 2], atol=1e-12)
+        np.testing.assert_allclose(b[i], pose[:3, 3] + half * pose[:3, 2], atol=1e-12)
+
+
+# -- distances ----------------------------------------------------------------------------------
+def _distance_to(robot, q, primitive_name, center, radius):
+    model = CollisionModel(robot, [SphereObstacle(center, radius)])
+    names = [p.name for p in robot.primitives]
+    d = model.distances(np.asarray(q, dtype=float))
+    i = names.index(primitive_name)
+    return d.distance[i, 0], d.robot_points[i, 0], d.obstacle_points[i, 0]
+
+
+@pytest.mark.parametrize(
+    ("center", "radius", "expected", "robot_point"),
+    [
+        ((0.5, 0.0, 0.6), 0.2, 0.5 - 0.1 - 0.2, (0.1, 0.0, 0.6)),  # beside the axis
+        ((0.3, 0.0, 1.4), 0.1, 0.5 - 0.1 - 0.1, (0.06, 0.0, 1.08)),  # past the upper end: to (0,0,1)
+        ((0.0, -0.6, -0.3), 0.2, math.hypot(0.6, 0.55) - 0.3, None),  # below the lower end: to (0,0,0.25)
+        ((0.15, 0.0, 0.6), 0.2, 0.15 - 0.1 - 0.2, None),  # overlapping: signed penetration
+    ],
+    ids=["side", "past-end", "below-start", "penetration"],
+)
+def test_capsule_sphere_distance_by_hand(paper_catalog, center, radius, expected, robot_point):
+    """L2 of B-J1-L2-E1 at q = 0 is the segment (0,0,0.25)-(0,0,1) with radius 0.1."""
+    robot = robot_model(Composition.from_name("B-J1-L2-E1", paper_catalog), paper_catalog, 0.0)
+    d, on_robot, on_obstacle = _distance_to(robot, [0.7, 0.0], "m2_L2_capsule", center, radius)
+    assert d == pytest.approx(expected, abs=1e-5 if expected < 0 else 1e-9)
+    if robot_point is not None:
+        np.testing.assert_allclose(on_robot, robot_point, atol=1e-9)
+        assert np.linalg.norm(on_obstacle - on_robot) == pytest.approx(d, abs=1e-9)
+
+
+def test_rotated_capsule_and_port_sphere(paper_catalog):
+    """B-J1-L1-E1: L1 runs from (0,0,0.25) along -Rz(q1)·y for 0.75 m; E1's port sphere sits at
+    its output, 0.2 m further."""
+    robot = robot_model(Composition.from_name("B-J1-L1-E1", paper_catalog), paper_catalog, 0.0)
+    q1 = 0.4
+    along = np.array([math.sin(q1), -math.cos(q1), 0.0])  # Rz(q1) applied to -y
+    side = np.array([math.cos(q1), math.sin(q1), 0.0])
+    center = np.array([0, 0, 0.25]) + 0.5 * along + 0.4 * side
+    d, *_ = _distance_to(robot, [q1, 0.0], "m2_L1_capsule", center, 0.1)
+    assert d == pytest.approx(0.4 - 0.1 - 0.1, abs=1e-9)
+    port = np.array([0, 0, 0.25]) + 0.95 * along
+    d, *_ = _distance_to(robot, [q1, 0.0], "m3_E1_port", port + [0, 0, 0.5], 0.15)
+    assert d == pytest.approx(0.5 - 0.1 - 0.15, abs=1e-9)
+
+
+def test_min_distance_and_collision_flag(paper_catalog):
+    robot = robot_model(Composition.from_name("B-J1-L2-E1", paper_catalog), paper_catalog, 0.0)
+    clear = CollisionModel(robot, [SphereObstacle((1.0, 0.0, 0.6), 0.2)])
+    hit = CollisionModel(robot, [SphereObstacle((1.0, 0.0, 0.6), 0.2), SphereObstacle((0.0, 0.0, 1.3), 0.1)])
+    assert clear.min_distance(np.zeros(2)) == pytest.approx(0.7)
+    assert not clear.in_collision(np.zeros(2)) and hit.in_collision(np.zeros(2))
+    assert CollisionModel(robot, []).min_distance(np.zeros(2)) == math.inf
