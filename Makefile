@@ -14,8 +14,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
+# Runs the pipeline as far as it is built (steps A and B); `run` replaces this with issue 5.
 run: install
+	mkdir -p results/paper-5kg
 	$(VENV)/bin/modular-robots enumerate scenarios/paper-5kg.yaml --count
+	$(VENV)/bin/modular-robots filter scenarios/paper-5kg.yaml --out results/paper-5kg/feasible.json
 
 test: install
 	$(PY) -m pytest -q

@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import functools
+import json
+import sys
+import time
 from pathlib import Path
 
 import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import ModularRobotsError
-from .scenario import load_scenario_or_catalog
+from .execution import make_engine
+from .feasibility import TESTS, FeasibilitySettings, FeasibilitySummary, filter_compositions
+from .scenario import load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
 
 __all__ = ["main"]
@@ -73,3 +78,73 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
     chain = Composition.from_name(composition, catalog)
     write_urdf(output, chain, catalog, payload)
     click.echo(f"wrote {output} ({chain.dof} joints, payload {payload:g} kg)")
+
+
+@main.command("filter")
+@click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
+@click.option("--jobs", "-j", type=click.IntRange(min=0), default=0, show_default="all cores",
+              help="Worker processes (1: run in this process).")
+@click.option("--seeds", type=click.IntRange(min=1), default=FeasibilitySettings.seeds, show_default=True,
+              help="IK start configurations per target.")
+@click.option("--out", "out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the verdict summary and the survivors with their boundary configurations as JSON.")
+@_user_errors
+def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None) -> None:
+    """Step B: which compositions can hold the start and the goal (reach, IK, torque, collision)."""
+    scenario = load_scenario(scenario_path)
+    settings = FeasibilitySettings(seeds=seeds)
+    engine = make_engine(jobs)
+    total = sum(count_compositions(scenario.catalog).values())
+    summary = FeasibilitySummary()
+    start = time.perf_counter()
+    with click.progressbar(length=total, label=f"step B on {total} compositions", file=sys.stderr,
+                           show_pos=True) as bar:
+        for verdict in filter_compositions(scenario, engine=engine, settings=settings):
+            summary.add(verdict)
+            bar.update(1)
+    wall = time.perf_counter() - start
+    click.echo(_feasibility_table(summary))
+    click.echo(f"{len(summary.survivors)} of {summary.checked} compositions are feasible "
+               f"({wall:.1f} s wall, {engine.jobs} worker(s))")
+    if summary.survivors:
+        click.echo(_survivor_table(summary))
+    if out is not None:
+        out.write_text(json.dumps(_feasibility_json(scenario, settings, summary, wall, engine.jobs), indent=1) + "\n")
+        click.echo(f"wrote {out}")
+    if not summary.survivors:
+        raise click.ClickException(summary.diagnosis())
+
+
+def _feasibility_table(summary: FeasibilitySummary) -> str:
+    remaining = summary.remaining_after()
+    lines = [f"{'test':<20} {'removed':>8} {'remaining':>10} {'cpu s':>8}"]
+    for test in TESTS:
+        lines.append(f"{test:<20} {summary.removed[test]:>8} {remaining[test]:>10} {summary.seconds[test]:>8.2f}")
+    lines.append(f"{'(model building)':<20} {'':>8} {'':>10} {summary.seconds['model']:>8.2f}")
+    return "\n".join(lines)
+
+
+def _survivor_table(summary: FeasibilitySummary, limit: int = 25) -> str:
+    ranked = sorted(summary.survivors, key=lambda v: v.time_bound)
+    lines = [f"{'composition':<34} {'dof':>3} {'time bound s':>12} {'torque ratio':>12} {'clearance m':>11}"]
+    for v in ranked[:limit]:
+        lines.append(f"{v.composition.name:<34} {v.composition.dof:>3} {v.time_bound:>12.3f} "
+                     f"{v.figures['torque_ratio']:>12.3f} {v.figures['clearance']:>11.3f}")
+    if len(ranked) > limit:
+        lines.append(f"... and {len(ranked) - limit} more (see --out)")
+    return "\n".join(lines)
+
+
+def _feasibility_json(scenario, settings, summary, wall, jobs) -> dict:
+    return {
+        "scenario": scenario.name,
+        "settings": {"seeds": settings.seeds, "tolerance": settings.tolerance,
+                     "max_iterations": settings.max_iterations, "jobs": jobs},
+        "enumerated": summary.checked,
+        "removed": summary.removed,
+        "remaining": summary.remaining_after(),
+        "cpu_seconds": summary.seconds,
+        "wall_seconds": wall,
+        "diagnosis": summary.diagnosis(),
+        "survivors": [v.to_json() for v in sorted(summary.survivors, key=lambda v: v.time_bound)],
+    }

@@ -108,6 +108,9 @@ def _read_task(f: Fields) -> Task:
         obstacles.append(SphereObstacle(center, radius))
     cost = f.string("cost", default="time", choices=COSTS)
     self_collision = f.boolean("self_collision", default=False)
+    if self_collision:
+        raise f.fail("self_collision", "self-collision checking is not supported yet (it is off in the "
+                                       "paper); remove the key or set it to false")
     f.done()
     return Task(payload, start, goal, tuple(obstacles), cost, self_collision)
 

@@ -119,6 +119,8 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         ("cost: time", "cost: energy", "cost:", "task.cost: expected one of time, effort; got 'energy'"),
         ("  cost: time", "  cost: time\n  speed: 3", "speed:",
          "task.speed: unknown key (expected one of: cost, goal, obstacles, payload, self_collision, start)"),
+        ("  cost: time", "  cost: time\n  self_collision: true", "self_collision:",
+         "task.self_collision: self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false"),
         ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 2, got 1"),
         ("threshold: 0.5", "threshold: half", "threshold:", "pruning.threshold: expected a number, got the string 'half'"),
         ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, none; got 'greedy'"),
@@ -129,7 +131,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         ("catalog: catalogs/paper.yaml", "catalog: catalogs/missing.yaml", "catalog:",
          "catalog: no catalogue file at {dir}/catalogs/missing.yaml"),
     ],
-    ids=["nan-target", "short-goal", "negative-payload", "unknown-cost", "unknown-key", "too-few-nodes",
+    ids=["nan-target", "short-goal", "negative-payload", "unknown-cost", "unknown-key", "self-collision", "too-few-nodes",
          "threshold-type", "unknown-rule", "obstacle-contains-base", "obstacle-contains-start", "missing-catalog"],
 )
 def test_scenario_errors_name_file_line_key(tmp_path, old, new, needle, message):

@@ -1,0 +1,344 @@
+"""Step B: which compositions can hold the start and the goal, cheapest test first.
+
+The cascade, in rank order (measured costs per call in ``benchmarks/results/feasibility.json``):
+
+0. ``reach`` — from catalogue numbers alone, before any model is built: the tool's distance
+   from the base is at most the sum, over the rigid pieces between consecutive revolute axes,
+   of each piece's largest length (prismatic strokes at their extremes). A revolute joint does
+   not change the distance between points on its axis and points after it, so the bound is
+   exact to the triangle inequality and can never drop a reachable target.
+1. ``inverse kinematics`` — position IK at the start and at the goal within joint limits, from
+   several deterministic seeds (:mod:`modular_robots.ik`).
+2. ``static torque`` — gravity torque with the payload within every joint's effort limit.
+3. ``collision`` — every collision primitive clear of every obstacle (python-fcl).
+
+Tests 2 and 3 run on *every* distinct IK solution: a composition passes a target as soon as
+one of its solutions passes both. Torque runs before collision because it is about 200 times
+cheaper. Among the passing solutions, the start and goal configurations that minimise the
+velocity-limited lower bound on motion time are kept for step C.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .catalog import Catalog
+from .collision import CollisionModel
+from .composition import Composition, enumerate_compositions
+from .execution import Engine, make_engine
+from .ik import DEFAULT_TOLERANCE, distinct, ik_seeds, solve_position_ik
+from .robot import RobotModel, robot_model
+from .scenario import Scenario, Task
+
+__all__ = [
+    "FeasibilitySettings",
+    "Verdict",
+    "FeasibilitySummary",
+    "TESTS",
+    "max_reach",
+    "check_composition",
+    "filter_compositions",
+]
+
+TESTS: tuple[str, ...] = ("reach", "inverse kinematics", "static torque", "collision")
+"""The cascade's tests, cheapest first."""
+
+
+@dataclass(frozen=True)
+class FeasibilitySettings:
+    """IK seeds per target, success tolerance [m] and iteration cap per IK run.
+
+    When a target is reached but no solution passes the torque and collision tests, the search
+    is widened to ``seeds * escalation`` seeds before the composition is rejected: a borderline
+    composition is then not lost to an unlucky set of IK solutions (measured in
+    ``benchmarks/bench_feasibility.py`` against a 4x more thorough search).
+    """
+
+    seeds: int = 8
+    escalation: int = 4
+    tolerance: float = DEFAULT_TOLERANCE
+    max_iterations: int = 100
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The outcome for one composition.
+
+    ``failed_test`` is None when it passes; ``message`` says why it failed, with its figure,
+    e.g. ``static torque 140 N m > 100 N m (joint 2, goal)``. ``figures`` holds the closest
+    misses seen (``ik_error`` [m], ``torque_ratio``, ``clearance`` [m], ``reach_margin`` [m]).
+    For a passing composition, ``q_start``/``q_goal`` are the chosen boundary configurations
+    and ``time_bound`` [s] their velocity-limited lower bound on motion time.
+    """
+
+    composition: Composition
+    failed_test: str | None
+    message: str
+    figures: dict[str, float] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+    q_start: tuple[float, ...] | None = None
+    q_goal: tuple[float, ...] | None = None
+    time_bound: float | None = None
+
+    @property
+    def passed(self) -> bool:
+        return self.failed_test is None
+
+    def to_json(self) -> dict:
+        out = {"composition": self.composition.name, "dof": self.composition.dof,
+               "passed": self.passed, "failed_test": self.failed_test, "message": self.message,
+               "figures": self.figures}
+        if self.passed:
+            out.update(q_start=list(self.q_start), q_goal=list(self.q_goal), time_bound=self.time_bound)
+        return out
+
+
+# -- test 0: reach ------------------------------------------------------------------------------
+def _rx(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def max_reach(composition: Composition, catalog: Catalog) -> float:
+    """Upper bound on the tool's distance from the base origin [m], from catalogue numbers."""
+    total = 0.0
+    rotation, offset, strokes = np.eye(3), np.zeros(3), []
+
+    def piece() -> float:
+        corners = itertools.product(*[(lo * axis, hi * axis) for axis, lo, hi in strokes])
+        return max(float(np.linalg.norm(offset + sum(c, np.zeros(3)))) for c in corners)
+
+    for module in (catalog.module(m) for m in composition.modules):
+        rotation = rotation @ _rx(module.twist_in)
+        if module.joint == "revolute":
+            total += piece()
+            rotation, offset, strokes = np.eye(3), np.zeros(3), []
+        elif module.joint == "prismatic":
+            strokes.append((rotation[:, 2].copy(), module.limits.lower, module.limits.upper))
+        offset = offset + module.length * rotation[:, 2]
+        rotation = rotation @ _rx(module.twist_out)
+    return total + piece()
+
+
+# -- tests 2 and 3: per configuration ---------------------------------------------------------
+@dataclass(frozen=True)
+class _Check:
+    passed: bool
+    figure: float
+    message: str
+
+
+def _torque_check(robot: RobotModel, q: np.ndarray, label: str) -> _Check:
+    torque = np.abs(robot.gravity(q))
+    ratios = torque / robot.effort_limit
+    worst = int(np.argmax(ratios))
+    unit = "N" if robot.model.joints[worst + 1].shortname() == "JointModelPZ" else "N m"
+    message = (f"static torque {torque[worst]:.4g} {unit} > {robot.effort_limit[worst]:.4g} {unit} "
+               f"(joint {worst + 1}, {label})")
+    return _Check(bool(ratios[worst] <= 1.0), float(ratios[worst]), message)
+
+
+def _collision_check(collision: CollisionModel, q: np.ndarray, label: str) -> _Check:
+    distances = collision.distances(q)
+    if not distances.distance.size:
+        return _Check(True, math.inf, "")
+    i, j = np.unravel_index(int(np.argmin(distances.distance)), distances.distance.shape)
+    clearance = float(distances.distance[i, j])
+    name = collision.robot.primitives[i].name
+    message = f"collision: {name} {-clearance:.3g} m inside obstacle {j + 1} ({label})"
+    return _Check(clearance > 0.0, clearance, message)
+
+
+# -- the cascade for one composition ---------------------------------------------------------
+class _Clock:
+    def __init__(self):
+        self.seconds = {test: 0.0 for test in ("model",) + TESTS}
+
+    def time(self, test: str, start: float) -> None:
+        self.seconds[test] += time.perf_counter() - start
+
+
+def check_composition(
+    composition: Composition, catalog: Catalog, task: Task, settings: FeasibilitySettings = FeasibilitySettings()
+) -> Verdict:
+    """Run the cascade on one composition; never raises for an infeasible one."""
+    clock = _Clock()
+    figures: dict[str, float] = {}
+    targets = {"start": np.asarray(task.start, dtype=float), "goal": np.asarray(task.goal, dtype=float)}
+
+    def fail(test: str, message: str) -> Verdict:
+        return Verdict(composition, test, message, figures, clock.seconds)
+
+    t0 = time.perf_counter()
+    reach = max_reach(composition, catalog)
+    far_label, far = max(targets.items(), key=lambda item: float(np.linalg.norm(item[1])))
+    figures["reach_margin"] = reach - float(np.linalg.norm(far))
+    clock.time("reach", t0)
+    if figures["reach_margin"] < 0.0:
+        return fail("reach", f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
+                             f"the arm reaches at most {reach:.3f} m")
+
+    t0 = time.perf_counter()
+    robot = robot_model(composition, catalog, task.payload)
+    collision = CollisionModel(robot, task.obstacles)
+    seeds = ik_seeds(robot, settings.seeds)
+    clock.time("model", t0)
+
+    passing: dict[str, list[np.ndarray]] = {}
+    for label, target in targets.items():
+        outcome = _target(robot, collision, target, label, seeds, settings, clock)
+        if outcome.solutions and not outcome.kept and settings.escalation > 1:
+            more = ik_seeds(robot, settings.seeds * settings.escalation)[settings.seeds:]
+            outcome = _target(robot, collision, target, label, more, settings, clock, outcome)
+        figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
+        if not outcome.solutions:
+            return fail("inverse kinematics", f"inverse kinematics: no solution within joint limits at "
+                                              f"the {label} (closest {outcome.error:.3g} m)")
+        # the composition needs at least its best ratio at every target seen so far
+        figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
+        if not outcome.kept:
+            tests_passed, _, message = outcome.closest
+            return fail("static torque" if tests_passed == 0 else "collision", message)
+        passing[label] = outcome.kept
+    q_start, q_goal, bound = _boundary_pair(robot, passing["start"], passing["goal"])
+    figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
+    figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
+    return Verdict(composition, None, "feasible", figures, clock.seconds,
+                   tuple(map(float, q_start)), tuple(map(float, q_goal)), bound)
+
+
+@dataclass
+class _TargetOutcome:
+    solutions: list[np.ndarray]
+    error: float
+    kept: list[np.ndarray]
+    best_ratio: float
+    closest: tuple[int, float, str] | None  # (tests passed, figure, message) of the best reject
+
+
+def _target(robot, collision, target, label, seeds, settings, clock, earlier=None) -> _TargetOutcome:
+    """IK from every seed, then torque and collision on every distinct new solution (the
+    ``earlier`` outcome of the same target, if any, is extended)."""
+    t0 = time.perf_counter()
+    runs = [solve_position_ik(robot, target, q0, tolerance=settings.tolerance,
+                              max_iterations=settings.max_iterations) for q0 in seeds]
+    known = earlier.solutions if earlier else []
+    solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
+    clock.time("inverse kinematics", t0)
+    error = min([r.error for r in runs] + ([earlier.error] if earlier else []))
+    outcome = earlier or _TargetOutcome([], error, [], math.inf, None)
+    outcome.solutions, outcome.error = solutions, error
+    for q in solutions[len(known):]:
+        t0 = time.perf_counter()
+        torque = _torque_check(robot, q, label)
+        clock.time("static torque", t0)
+        outcome.best_ratio = min(outcome.best_ratio, torque.figure)
+        if not torque.passed:
+            outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
+            continue
+        t0 = time.perf_counter()
+        clear = _collision_check(collision, q, label)
+        clock.time("collision", t0)
+        if not clear.passed:
+            outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))
+            continue
+        outcome.kept.append(q)
+    return outcome
+
+
+def _closer(best, candidate):
+    return candidate if best is None or candidate[:2] > best[:2] else best
+
+
+def _boundary_pair(robot: RobotModel, starts, goals) -> tuple[np.ndarray, np.ndarray, float]:
+    """The (start, goal) pair minimising ``max_i |q_goal,i - q_start,i| / qdot_max,i``.
+
+    Joint limits of the paper catalogue do not allow wrapping through +-pi, so the shortest
+    way within limits is the plain difference.
+    """
+    velocity = robot.velocity_limit
+    best = min(itertools.product(starts, goals), key=lambda pair: float(np.max(np.abs(pair[1] - pair[0]) / velocity)))
+    return best[0], best[1], float(np.max(np.abs(best[1] - best[0]) / velocity))
+
+
+# -- many compositions -------------------------------------------------------------------------
+def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
+    catalog, task, settings = context
+    return [check_composition(c, catalog, task, settings) for c in chunk]
+
+
+def filter_compositions(
+    scenario: Scenario,
+    compositions: Iterable[Composition] | None = None,
+    *,
+    engine: Engine | None = None,
+    settings: FeasibilitySettings = FeasibilitySettings(),
+) -> Iterator[Verdict]:
+    """Yield a :class:`Verdict` per composition (default: all of step A), in input order.
+
+    Streams: compositions are drawn lazily and at most a few chunks are in flight, on every
+    core by default. Verdicts do not depend on the engine or its number of workers.
+    """
+    if compositions is None:
+        compositions = enumerate_compositions(scenario.catalog)
+    engine = engine or make_engine()
+    context = (scenario.catalog, scenario.task, settings)
+    yield from engine.map_chunks(_check_chunk, context, compositions, chunksize=8)
+
+
+@dataclass
+class FeasibilitySummary:
+    """Counts, CPU seconds per test and the closest misses of a stream of verdicts."""
+
+    checked: int = 0
+    removed: dict[str, int] = field(default_factory=lambda: {t: 0 for t in TESTS})
+    seconds: dict[str, float] = field(default_factory=lambda: {t: 0.0 for t in ("model",) + TESTS})
+    survivors: list[Verdict] = field(default_factory=list)
+    best_torque_ratio: float = math.inf
+    best_torque_miss: str = ""
+    smallest_ik_error: float = math.inf
+    smallest_ik_miss: str = ""
+
+    def add(self, verdict: Verdict) -> None:
+        self.checked += 1
+        for test, seconds in verdict.seconds.items():
+            self.seconds[test] += seconds
+        if verdict.passed:
+            self.survivors.append(verdict)
+            return
+        self.removed[verdict.failed_test] += 1
+        figure = verdict.figures
+        if verdict.failed_test == "static torque" and figure["torque_ratio"] < self.best_torque_ratio:
+            self.best_torque_ratio = figure["torque_ratio"]
+            self.best_torque_miss = f"{verdict.composition.name}: {verdict.message}"
+        if verdict.failed_test == "inverse kinematics" and figure["ik_error"] < self.smallest_ik_error:
+            self.smallest_ik_error = figure["ik_error"]
+            self.smallest_ik_miss = f"{verdict.composition.name}: {verdict.message}"
+
+    def remaining_after(self) -> dict[str, int]:
+        left, out = self.checked, {}
+        for test in TESTS:
+            left -= self.removed[test]
+            out[test] = left
+        return out
+
+    def diagnosis(self) -> str:
+        """Why nothing passed: the test that removed the last candidates and the closest miss."""
+        if self.survivors:
+            return ""
+        last = next((t for t in reversed(TESTS) if self.removed[t]), None)
+        if last is None:
+            return "no composition was checked"
+        lines = [f"no composition is feasible: the last {self.removed[last]} candidate(s) were removed by "
+                 f"the {last} test"]
+        if math.isfinite(self.best_torque_ratio):
+            lines.append(f"best torque ratio found: {self.best_torque_ratio:.2f} x the limit ({self.best_torque_miss})")
+        if math.isfinite(self.smallest_ik_error):
+            lines.append(f"smallest IK error: {self.smallest_ik_error:.3g} m ({self.smallest_ik_miss})")
+        return "\n".join(lines)

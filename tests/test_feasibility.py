@@ -1,0 +1,187 @@
+"""Step B: each test fails and passes on hand-built cases; IK solutions are verified by FK."""
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from modular_robots import Composition, SphereObstacle, Task, enumerate_compositions, load_scenario, robot_model
+from modular_robots.cli import main
+from modular_robots.execution import ProcessEngine, SerialEngine
+from modular_robots.feasibility import FeasibilitySummary, check_composition, filter_compositions, max_reach
+from modular_robots.ik import _lm_step, ik_seeds, solve_position_ik
+
+from .conftest import PAPER_5KG, PAPER_CATALOG
+
+G = 9.81
+
+
+def _task(start, goal=None, payload=0.0, obstacles=()):
+    return Task(payload=payload, start=tuple(start), goal=tuple(goal or start), obstacles=tuple(obstacles))
+
+
+def _check(catalog, name, task):
+    return check_composition(Composition.from_name(name, catalog), catalog, task)
+
+
+# -- reach -------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("name", "expected"),
+    [
+        ("B-J1-L2-E1", 0.25 + 0.75 + 0.2),  # straight up
+        ("B-J2-L2-E2", 0.25 + 0.2 + 0.75 + 0.2 + 0.1),  # strokes extended
+        ("B-J1-L1-E1", math.hypot(0.25, 0.75) + 0.2),  # L1 turns before it extends
+        ("B-J1-L1-J1-L1-E1", 2 * math.hypot(0.25, 0.75) + 0.2),
+    ],
+)
+def test_max_reach_by_hand(paper_catalog, name, expected):
+    assert max_reach(Composition.from_name(name, paper_catalog), paper_catalog) == pytest.approx(expected, abs=1e-12)
+
+
+def test_max_reach_is_an_upper_bound(paper_catalog):
+    """No sampled configuration of any sampled composition goes beyond the bound."""
+    rng = np.random.default_rng(3)
+    for composition in itertools.islice(enumerate_compositions(paper_catalog), 0, None, 53):
+        robot = robot_model(composition, paper_catalog, 0.0)
+        bound = max_reach(composition, paper_catalog)
+        reaches = [np.linalg.norm(robot.tool_position(rng.uniform(robot.lower, robot.upper))) for _ in range(40)]
+        assert max(reaches) <= bound + 1e-12, composition.name
+
+
+def test_arm_too_short(paper_catalog):
+    verdict = _check(paper_catalog, "B-J1-L2-E1", _task((0.0, 0.0, 1.3)))
+    assert verdict.failed_test == "reach"
+    assert verdict.message == "reach: the start is 1.300 m from the base, the arm reaches at most 1.200 m"
+    assert verdict.figures["reach_margin"] == pytest.approx(-0.1)
+
+
+# -- inverse kinematics ----------------------------------------------------------------------
+def test_target_outside_joint_limits(paper_catalog):
+    """B-J2-L2-E2 moves its tool along z from 1.2 m (strokes at 0) to 1.5 m: 1.1 m is within
+    reach but below the prismatic lower limits."""
+    verdict = _check(paper_catalog, "B-J2-L2-E2", _task((0.0, 0.0, 1.1)))
+    assert verdict.failed_test == "inverse kinematics"
+    assert verdict.message == "inverse kinematics: no solution within joint limits at the start (closest 0.1 m)"
+    passed = _check(paper_catalog, "B-J2-L2-E2", _task((0.0, 0.0, 1.42)))
+    assert passed.passed and sum(passed.q_start) == pytest.approx(0.22, abs=1e-4)
+
+
+def test_ik_solutions_hold_the_target_within_limits(paper_catalog):
+    scenario = load_scenario(PAPER_5KG)
+    names = ["B-J1-L3-J1-L2-J1-L3-J1-L3-E1", "B-J1-L3-J1-L3-J2-L2-J1-L1-E1", "B-J1-L2-J1-L1-J1-L3-J1-L1-E1"]
+    for name in names:
+        verdict = check_composition(Composition.from_name(name, paper_catalog), paper_catalog, scenario.task)
+        assert verdict.passed, verdict.message
+        robot = robot_model(verdict.composition, paper_catalog, scenario.task.payload)
+        for q, target in ((verdict.q_start, scenario.task.start), (verdict.q_goal, scenario.task.goal)):
+            q = np.array(q)
+            assert np.all(q >= robot.lower) and np.all(q <= robot.upper)
+            assert np.linalg.norm(robot.tool_position(q) - target) <= 1e-4
+        expected_bound = np.max(np.abs(np.subtract(verdict.q_goal, verdict.q_start)) / robot.velocity_limit)
+        assert verdict.time_bound == pytest.approx(expected_bound)
+
+
+def test_ik_converges_from_every_seed_on_a_reachable_target(paper_catalog):
+    robot = robot_model(Composition.from_name("B-J1-L3-J1-L1-J1-L3-E1", paper_catalog), paper_catalog, 0.0)
+    rng = np.random.default_rng(7)
+    target = robot.tool_position(rng.uniform(robot.lower, robot.upper))
+    results = [solve_position_ik(robot, target, q0) for q0 in ik_seeds(robot, 8)]
+    assert sum(r.success() for r in results) >= 6
+    for r in results:
+        if r.success():
+            assert np.linalg.norm(robot.tool_position(r.q) - target) == pytest.approx(r.error, abs=1e-12)
+
+
+def test_lm_step_matches_the_plain_normal_equations():
+    rng = np.random.default_rng(0)
+    for n in range(1, 7):
+        jacobian, error = rng.normal(size=(3, n)), rng.normal(size=3)
+        norm = float(np.linalg.norm(error))
+        damping = 0.5 * norm * norm + 1e-4
+        reference = np.linalg.solve(jacobian.T @ jacobian + damping * np.eye(n), jacobian.T @ error)
+        np.testing.assert_allclose(_lm_step(jacobian, error, norm), reference, rtol=1e-10, atol=1e-13)
+
+
+# -- collision -----------------------------------------------------------------------------------
+def test_pose_forced_through_an_obstacle(paper_catalog):
+    """B-J1-L2-E1 always stands straight up; L2 spans z in [0.25, 1] with radius 0.1."""
+    blocking = SphereObstacle((0.35, 0.0, 0.6), 0.3)  # 0.35 - 0.1 - 0.3 = -0.05: overlaps L2
+    verdict = _check(paper_catalog, "B-J1-L2-E1", _task((0.0, 0.0, 1.2), obstacles=[blocking]))
+    assert verdict.failed_test == "collision"
+    assert verdict.message == "collision: m2_L2_capsule 0.05 m inside obstacle 1 (start)"
+    clear = SphereObstacle((0.45, 0.0, 0.6), 0.3)
+    passed = _check(paper_catalog, "B-J1-L2-E1", _task((0.0, 0.0, 1.2), obstacles=[clear]))
+    assert passed.passed and passed.figures["clearance"] == pytest.approx(0.05, abs=1e-9)
+
+
+# -- static torque -------------------------------------------------------------------------------
+def _threshold_case():
+    """B-J1-L1-J1-L1-E1: joint 2's axis runs horizontally along the first L1, 0.25 m up; its
+    pivot point is 0.75 + 0.25 m out from the base axis. The arm after it (L1 centre 0.375 m, E1
+    0.75 m, payload 0.95 m from the axis) swings in the vertical plane across that axis. A target
+    0.725 m high fixes |cos q2| = 0.5, so |tau2| = g sin(60 deg) (0.375 m_L1 + 0.75 m_E1 +
+    0.95 m_payload), whatever q1 and q3."""
+    sin = math.sin(math.radians(60))
+    radius = math.hypot(1.0, 0.95 * sin)
+    target = (radius, 0.0, 0.25 + 0.95 * 0.5)
+    threshold = (100.0 / (G * sin) - 0.375 * 0.05 - 0.75 * 0.5) / 0.95
+    return target, threshold
+
+
+def test_payload_just_under_and_just_over_the_limit(paper_catalog):
+    target, threshold = _threshold_case()
+    assert threshold == pytest.approx(11.9756, abs=1e-4)
+    under = _check(paper_catalog, "B-J1-L1-J1-L1-E1", _task(target, payload=threshold * 0.99))
+    assert under.passed, under.message
+    lever = 0.375 * 0.05 + 0.75 * 0.5
+    # IK holds the target to 1e-4 m, which moves sin(q2) by up to ~6e-5 relative
+    assert under.figures["torque_ratio"] == pytest.approx((lever + 0.95 * 0.99 * threshold) / (lever + 0.95 * threshold), rel=2e-4)
+    over = _check(paper_catalog, "B-J1-L1-J1-L1-E1", _task(target, payload=threshold * 1.01))
+    assert over.failed_test == "static torque"
+    assert over.message.startswith("static torque 10") and over.message.endswith(" N m > 100 N m (joint 2, start)")
+    assert over.figures["torque_ratio"] == pytest.approx((lever + 0.95 * 1.01 * threshold) / (lever + 0.95 * threshold), rel=2e-4)
+
+
+def test_no_feasible_composition_gives_a_diagnosis(paper_catalog):
+    """At 50 kg the compositions that hold 5 kg fail on torque; the summary says so."""
+    scenario = load_scenario(PAPER_5KG)
+    heavy = dataclasses.replace(scenario.task, payload=50.0)
+    summary = FeasibilitySummary()
+    for name in ("B-J1-L3-J1-L2-J1-L3-J1-L3-E1", "B-J1-L2-J1-L1-J1-L3-J1-L1-E1", "B-J1-L2-E1"):
+        summary.add(check_composition(Composition.from_name(name, paper_catalog), paper_catalog, heavy))
+    assert summary.removed == {"reach": 1, "inverse kinematics": 0, "static torque": 2, "collision": 0}
+    lines = summary.diagnosis().splitlines()
+    assert lines[0] == "no composition is feasible: the last 2 candidate(s) were removed by the static torque test"
+    assert lines[1].startswith("best torque ratio found: ") and float(lines[1].split()[4]) > 1.0
+
+
+# -- streaming and workers -------------------------------------------------------------------------
+def test_same_verdicts_with_one_and_two_workers():
+    scenario = load_scenario(PAPER_5KG)
+    sample = list(itertools.islice(enumerate_compositions(scenario.catalog, dof=5), 0, None, 40))
+    one = list(filter_compositions(scenario, sample, engine=SerialEngine()))
+    two = list(filter_compositions(scenario, sample, engine=ProcessEngine(2)))
+    assert [v.composition for v in one] == sample
+    key = lambda v: (v.composition, v.failed_test, v.message, v.q_start, v.q_goal, v.time_bound)  # noqa: E731
+    assert [key(v) for v in one] == [key(v) for v in two]
+    assert any(v.passed for v in one) and any(not v.passed for v in one)
+
+
+def test_filter_cli_on_a_small_catalogue(tmp_path):
+    """A 2-3 DOF version of the paper catalogue cannot reach the paper's targets: the command
+    prints the table, then fails with the diagnosis."""
+    (tmp_path / "catalogs").mkdir()
+    (tmp_path / "catalogs" / "paper.yaml").write_text(PAPER_CATALOG.read_text().replace("dof: [2, 5]", "dof: [2, 3]"))
+    (tmp_path / "s.yaml").write_text(PAPER_5KG.read_text())
+    out = tmp_path / "feasible.json"
+    result = CliRunner().invoke(main, ["filter", str(tmp_path / "s.yaml"), "--jobs", "1", "--out", str(out)])
+    assert result.exit_code == 1
+    rows = {line.split()[0]: line.split()[1:] for line in result.output.splitlines() if line.strip()}
+    assert rows["reach"][:2] == ["84", "0"] and rows["collision"][:2] == ["0", "0"]
+    assert "0 of 84 compositions are feasible" in result.output
+    assert result.output.rstrip().endswith(
+        "Error: no composition is feasible: the last 84 candidate(s) were removed by the reach test")
+    assert out.exists()
