@@ -10,7 +10,7 @@ from pathlib import Path
 
 from modular_robots import load_scenario
 from modular_robots.execution import ProcessEngine, SerialEngine, available_cores
-from modular_robots.feasibility import TESTS, FeasibilitySettings, FeasibilitySummary, filter_compositions
+from modular_robots.feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, filter_compositions
 
 from ._common import table, write
 
@@ -34,7 +34,7 @@ def main() -> None:
 
     tested = serial.checked
     rows = []
-    for test in TESTS:
+    for test in TEST_NAMES:
         rows.append({"stage": test, "compositions_tested": tested, "removed": serial.removed[test],
                      "cpu_seconds": serial.seconds[test],
                      "compositions_per_second": tested / serial.seconds[test] if serial.seconds[test] else None})
@@ -51,7 +51,7 @@ def main() -> None:
     for payload in (0.5, 5.0, 50.0):
         variant = dataclasses.replace(scenario, task=dataclasses.replace(scenario.task, payload=payload))
         summary, wall = run(variant, ProcessEngine(cores))
-        payloads.append({"payload_kg": payload, **{f"removed_{t}": summary.removed[t] for t in TESTS},
+        payloads.append({"payload_kg": payload, **{f"removed_{t}": summary.removed[t] for t in TEST_NAMES},
                          "feasible": len(summary.survivors), "best_failed_torque_ratio": summary.best_torque_ratio,
                          "wall_seconds": wall})
 

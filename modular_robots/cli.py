@@ -13,7 +13,7 @@ import click
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import ModularRobotsError
 from .execution import make_engine
-from .feasibility import TESTS, FeasibilitySettings, FeasibilitySummary, filter_compositions
+from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, filter_compositions
 from .scenario import load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
 
@@ -118,7 +118,7 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None)
 def _feasibility_table(summary: FeasibilitySummary) -> str:
     remaining = summary.remaining_after()
     lines = [f"{'test':<20} {'removed':>8} {'remaining':>10} {'cpu s':>8}"]
-    for test in TESTS:
+    for test in TEST_NAMES:
         lines.append(f"{test:<20} {summary.removed[test]:>8} {remaining[test]:>10} {summary.seconds[test]:>8.2f}")
     lines.append(f"{'(model building)':<20} {'':>8} {'':>10} {summary.seconds['model']:>8.2f}")
     return "\n".join(lines)

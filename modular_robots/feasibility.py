@@ -37,6 +37,7 @@ from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
 
 __all__ = [
+    "FeasibilityTest",
     "FeasibilitySettings",
     "Verdict",
     "FeasibilitySummary",
@@ -46,8 +47,27 @@ __all__ = [
     "filter_compositions",
 ]
 
-TESTS: tuple[str, ...] = ("reach", "inverse kinematics", "static torque", "collision")
-"""The cascade's tests, cheapest first."""
+@dataclass(frozen=True)
+class FeasibilityTest:
+    """One test of the cascade: its ``name`` (as verdicts report it), its ``rank`` (the order it
+    runs in, cheapest first), the ``figure`` its verdicts carry and what it checks."""
+
+    name: str
+    rank: int
+    figure: str
+    description: str
+
+
+REACH = FeasibilityTest("reach", 0, "reach_margin [m]", "tool distance bound from catalogue numbers")
+INVERSE_KINEMATICS = FeasibilityTest("inverse kinematics", 1, "ik_error [m]",
+                                     "position IK at start and goal within joint limits")
+STATIC_TORQUE = FeasibilityTest("static torque", 2, "torque_ratio",
+                                "gravity torque with the payload within effort limits")
+COLLISION = FeasibilityTest("collision", 3, "clearance [m]", "every primitive clear of every obstacle")
+
+TESTS: tuple[FeasibilityTest, ...] = (REACH, INVERSE_KINEMATICS, STATIC_TORQUE, COLLISION)
+"""The cascade's tests, in rank order (cheapest first)."""
+TEST_NAMES: tuple[str, ...] = tuple(t.name for t in TESTS)
 
 
 @dataclass(frozen=True)
@@ -158,7 +178,7 @@ def _collision_check(collision: CollisionModel, q: np.ndarray, label: str) -> _C
 # -- the cascade for one composition ---------------------------------------------------------
 class _Clock:
     def __init__(self):
-        self.seconds = {test: 0.0 for test in ("model",) + TESTS}
+        self.seconds = {test: 0.0 for test in ("model",) + TEST_NAMES}
 
     def time(self, test: str, start: float) -> None:
         self.seconds[test] += time.perf_counter() - start
@@ -297,8 +317,8 @@ class FeasibilitySummary:
     """Counts, CPU seconds per test and the closest misses of a stream of verdicts."""
 
     checked: int = 0
-    removed: dict[str, int] = field(default_factory=lambda: {t: 0 for t in TESTS})
-    seconds: dict[str, float] = field(default_factory=lambda: {t: 0.0 for t in ("model",) + TESTS})
+    removed: dict[str, int] = field(default_factory=lambda: {t: 0 for t in TEST_NAMES})
+    seconds: dict[str, float] = field(default_factory=lambda: {t: 0.0 for t in ("model",) + TEST_NAMES})
     survivors: list[Verdict] = field(default_factory=list)
     best_torque_ratio: float = math.inf
     best_torque_miss: str = ""
@@ -323,7 +343,7 @@ class FeasibilitySummary:
 
     def remaining_after(self) -> dict[str, int]:
         left, out = self.checked, {}
-        for test in TESTS:
+        for test in TEST_NAMES:
             left -= self.removed[test]
             out[test] = left
         return out
@@ -332,7 +352,7 @@ class FeasibilitySummary:
         """Why nothing passed: the test that removed the last candidates and the closest miss."""
         if self.survivors:
             return ""
-        last = next((t for t in reversed(TESTS) if self.removed[t]), None)
+        last = next((t for t in reversed(TEST_NAMES) if self.removed[t]), None)
         if last is None:
             return "no composition was checked"
         lines = [f"no composition is feasible: the last {self.removed[last]} candidate(s) were removed by "
