@@ -199,9 +199,9 @@ def check_composition(
     reach = max_reach(composition, catalog)
     far_label, far = max(targets.items(), key=lambda item: float(np.linalg.norm(item[1])))
     figures["reach_margin"] = reach - float(np.linalg.norm(far))
-    clock.time("reach", t0)
+    clock.time(REACH.name, t0)
     if figures["reach_margin"] < 0.0:
-        return fail("reach", f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
+        return fail(REACH.name, f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
                              f"the arm reaches at most {reach:.3f} m")
 
     t0 = time.perf_counter()
@@ -218,13 +218,13 @@ def check_composition(
             outcome = _target(robot, collision, target, label, more, settings, clock, outcome)
         figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
         if not outcome.solutions:
-            return fail("inverse kinematics", f"inverse kinematics: no solution within joint limits at "
+            return fail(INVERSE_KINEMATICS.name, f"inverse kinematics: no solution within joint limits at "
                                               f"the {label} (closest {outcome.error:.3g} m)")
         # the composition needs at least its best ratio at every target seen so far
         figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
         if not outcome.kept:
             tests_passed, _, message = outcome.closest
-            return fail("static torque" if tests_passed == 0 else "collision", message)
+            return fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
         passing[label] = outcome.kept
     q_start, q_goal, bound = _boundary_pair(robot, passing["start"], passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
@@ -250,21 +250,21 @@ def _target(robot, collision, target, label, seeds, settings, clock, earlier=Non
                               max_iterations=settings.max_iterations) for q0 in seeds]
     known = earlier.solutions if earlier else []
     solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
-    clock.time("inverse kinematics", t0)
+    clock.time(INVERSE_KINEMATICS.name, t0)
     error = min([r.error for r in runs] + ([earlier.error] if earlier else []))
     outcome = earlier or _TargetOutcome([], error, [], math.inf, None)
     outcome.solutions, outcome.error = solutions, error
     for q in solutions[len(known):]:
         t0 = time.perf_counter()
         torque = _torque_check(robot, q, label)
-        clock.time("static torque", t0)
+        clock.time(STATIC_TORQUE.name, t0)
         outcome.best_ratio = min(outcome.best_ratio, torque.figure)
         if not torque.passed:
             outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
             continue
         t0 = time.perf_counter()
         clear = _collision_check(collision, q, label)
-        clock.time("collision", t0)
+        clock.time(COLLISION.name, t0)
         if not clear.passed:
             outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))
             continue
@@ -334,10 +334,10 @@ class FeasibilitySummary:
             return
         self.removed[verdict.failed_test] += 1
         figure = verdict.figures
-        if verdict.failed_test == "static torque" and figure["torque_ratio"] < self.best_torque_ratio:
+        if verdict.failed_test == STATIC_TORQUE.name and figure["torque_ratio"] < self.best_torque_ratio:
             self.best_torque_ratio = figure["torque_ratio"]
             self.best_torque_miss = f"{verdict.composition.name}: {verdict.message}"
-        if verdict.failed_test == "inverse kinematics" and figure["ik_error"] < self.smallest_ik_error:
+        if verdict.failed_test == INVERSE_KINEMATICS.name and figure["ik_error"] < self.smallest_ik_error:
             self.smallest_ik_error = figure["ik_error"]
             self.smallest_ik_miss = f"{verdict.composition.name}: {verdict.message}"
 

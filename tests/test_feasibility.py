@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from modular_robots import Composition, SphereObstacle, Task, enumerate_compositions, load_scenario, robot_model
 from modular_robots.cli import main
 from modular_robots.execution import ProcessEngine, SerialEngine
-from modular_robots.feasibility import FeasibilitySummary, check_composition, filter_compositions, max_reach
+from modular_robots.feasibility import TESTS, FeasibilitySummary, check_composition, filter_compositions, max_reach
 from modular_robots.ik import _lm_step, ik_seeds, solve_position_ik
 
 from .conftest import PAPER_5KG, PAPER_CATALOG
@@ -185,3 +185,8 @@ def test_filter_cli_on_a_small_catalogue(tmp_path):
     assert result.output.rstrip().endswith(
         "Error: no composition is feasible: the last 84 candidate(s) were removed by the reach test")
     assert out.exists()
+
+
+def test_cascade_order_is_rank_order():
+    assert [t.rank for t in TESTS] == list(range(len(TESTS)))
+    assert [t.name for t in TESTS] == ["reach", "inverse kinematics", "static torque", "collision"]
