@@ -2,7 +2,8 @@
 
 The pipeline, one module per stage: :mod:`~modular_robots.catalog` →
 :mod:`~modular_robots.composition` (step A) → :mod:`~modular_robots.urdf` →
-:mod:`~modular_robots.robot` and :mod:`~modular_robots.collision`.
+:mod:`~modular_robots.robot` and :mod:`~modular_robots.collision` →
+:mod:`~modular_robots.feasibility` (step B), run by an engine of :mod:`~modular_robots.execution`.
 Units are SI (m, kg, s, N, N m) and radians throughout.
 """
 
@@ -11,6 +12,14 @@ import logging
 from .catalog import Catalog, Grammar, JointLimits, Module, load_catalog
 from .collision import CollisionModel, Distances, SphereObstacle
 from .composition import Composition, count_compositions, enumerate_compositions
+from .execution import ProcessEngine, SerialEngine, make_engine
+from .feasibility import (
+    FeasibilitySettings,
+    FeasibilitySummary,
+    Verdict,
+    check_composition,
+    filter_compositions,
+)
 from .exceptions import (
     CatalogError,
     CompositionError,
@@ -31,24 +40,32 @@ __all__ = [
     "Composition",
     "CompositionError",
     "Distances",
+    "FeasibilitySettings",
+    "FeasibilitySummary",
     "Grammar",
     "InputError",
     "JointLimits",
     "ModularRobotsError",
     "Module",
     "OptimizerSettings",
+    "ProcessEngine",
     "Primitive",
     "PruningSettings",
     "RobotModel",
     "Scenario",
     "ScenarioError",
+    "SerialEngine",
     "SphereObstacle",
     "Task",
+    "Verdict",
+    "check_composition",
     "composition_urdf",
     "count_compositions",
     "enumerate_compositions",
+    "filter_compositions",
     "load_catalog",
     "load_scenario",
+    "make_engine",
     "robot_model",
     "write_urdf",
 ]
