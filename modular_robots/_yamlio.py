@@ -108,6 +108,10 @@ class Fields:
         self._error = error
         self._read: set[str] = set()
 
+    def reporting(self, error: type[InputError]) -> Fields:
+        """The same mapping, reporting its errors as ``error`` (once the file's kind is known)."""
+        return Fields(self._data, self.path, self._prefix, error)
+
     # -- error reporting -------------------------------------------------------------------
     def key_path(self, key: str | int | None = None) -> str:
         if key is None:

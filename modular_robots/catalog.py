@@ -120,7 +120,12 @@ def load_catalog(path: str | Path) -> Catalog:
     CatalogError
         Naming the file, line and key, and what was expected.
     """
-    top = load_yaml(Path(path), CatalogError)
+    return catalog_from_fields(load_yaml(Path(path), CatalogError))
+
+
+def catalog_from_fields(top: Fields) -> Catalog:
+    """:func:`load_catalog` on an already parsed file."""
+    top = top.reporting(CatalogError)
     name = top.string("name")
     top.string("description", default="")
     modules: list[Module] = []
@@ -139,7 +144,7 @@ def load_catalog(path: str | Path) -> Catalog:
     if grammar.links_after_joint[1] > 0 or grammar.links_after_base[1] > 0:
         if not any(m.kind == "link" for m in modules):
             raise top.fail("grammar", "the grammar asks for links but no module is of kind 'link'")
-    return Catalog(name=name, modules=tuple(modules), grammar=grammar, source=str(path))
+    return Catalog(name=name, modules=tuple(modules), grammar=grammar, source=str(top.path))
 
 
 def _read_grammar(fields: Fields) -> Grammar:

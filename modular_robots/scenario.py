@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ._yamlio import Fields, load_yaml
-from .catalog import Catalog, load_catalog
+from .catalog import Catalog, catalog_from_fields, load_catalog
 from .collision import SphereObstacle
 from .exceptions import InputError, ScenarioError
 
@@ -73,8 +73,12 @@ def load_scenario(path: str | Path) -> Scenario:
         Naming the file, line and key, and what was expected (catalogue errors propagate as
         :class:`~modular_robots.exceptions.CatalogError`).
     """
-    path = Path(path)
-    top = load_yaml(path, ScenarioError)
+    return _scenario_from_fields(load_yaml(Path(path), ScenarioError))
+
+
+def _scenario_from_fields(top: Fields) -> Scenario:
+    top = top.reporting(ScenarioError)
+    path = top.path
     name = top.string("name")
     top.string("description", default="")
     catalog_path = path.parent / top.string("catalog")
@@ -150,6 +154,6 @@ def load_scenario_or_catalog(path: str | Path) -> tuple[Scenario | None, Catalog
     path = Path(path)
     top = load_yaml(path, InputError)
     if top.has("task"):
-        scenario = load_scenario(path)
+        scenario = _scenario_from_fields(top)
         return scenario, scenario.catalog
-    return None, load_catalog(path)
+    return None, catalog_from_fields(top)
