@@ -6,11 +6,13 @@ spheres. Distances are signed: negative when the shapes overlap (penetration dep
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import fcl
 import numpy as np
+import pinocchio as pin
 
 from .robot import RobotModel
 
@@ -40,27 +42,57 @@ class Distances:
 
 
 class CollisionModel:
-    """FCL shapes of one robot's primitives and of the obstacles around it."""
+    """FCL shapes of one robot's primitives and of the obstacles around it.
 
-    def __init__(self, robot: RobotModel, obstacles: Sequence[SphereObstacle]):
+    ``primitives`` selects which of the robot's primitives take part (indices into
+    ``robot.primitives``; default all of them).
+    """
+
+    def __init__(self, robot: RobotModel, obstacles: Sequence[SphereObstacle],
+                 primitives: Sequence[int] | None = None):
         self.robot = robot
         self.obstacles = tuple(obstacles)
+        self.primitive_indices = tuple(range(len(robot.primitives)) if primitives is None else primitives)
+        self._primitives = [robot.primitives[i] for i in self.primitive_indices]
+        self._frame_ids = [int(robot.model.getFrameId(p.frame)) for p in self._primitives]
         self._robot_objects = [
             fcl.CollisionObject(fcl.Capsule(p.radius, p.length) if p.length > 0 else fcl.Sphere(p.radius))
-            for p in robot.primitives
+            for p in self._primitives
         ]
+        self._prim_radii = np.array([p.radius for p in self._primitives], dtype=float)
+        self._prim_lengths = np.array([p.length for p in self._primitives], dtype=float)
+        self._prim_offsets = np.array([p.offset for p in self._primitives], dtype=float)
+        self._centers = np.array([o.center for o in self.obstacles], dtype=float).reshape(-1, 3)
+        self._radii = np.array([o.radius for o in self.obstacles], dtype=float)
         self._obstacle_objects = [
             fcl.CollisionObject(fcl.Sphere(o.radius), fcl.Transform(np.asarray(o.center, dtype=float)))
             for o in self.obstacles
         ]
 
-    def _place(self, q: np.ndarray) -> None:
-        for obj, pose in zip(self._robot_objects, self.robot.primitive_placements(q)):
-            obj.setTransform(fcl.Transform(pose.rotation, pose.translation))
+    def _axes(self, q: np.ndarray, kinematics_done: bool = False):
+        """Rotations ``(P, 3, 3)`` and axis end points ``a``, ``b`` ``(P, 3)`` of the primitives."""
+        model, data = self.robot.model, self.robot.data
+        if not kinematics_done:
+            pin.framesForwardKinematics(model, data, np.asarray(q, dtype=float))
+        poses = [data.oMf[fid] for fid in self._frame_ids]
+        rot = np.array([pose.rotation for pose in poses]).reshape(-1, 3, 3)
+        a = np.array([pose.translation for pose in poses]).reshape(-1, 3) + self._prim_offsets[:, None] * rot[:, :, 2]
+        b = a + self._prim_lengths[:, None] * rot[:, :, 2]
+        return rot, a, b
+
+    def _place_one(self, i: int, rot, a, b) -> None:
+        self._robot_objects[i].setTransform(fcl.Transform(rot[i], 0.5 * (a[i] + b[i])))
+
+    @property
+    def pairs(self) -> int:
+        """Number of (primitive, obstacle) pairs."""
+        return len(self._robot_objects) * len(self._obstacle_objects)
 
     def distances(self, q: np.ndarray) -> Distances:
         """Signed distance of every (primitive, obstacle) pair at configuration ``q``."""
-        self._place(q)
+        rot, a, b = self._axes(q)
+        for i in range(len(self._robot_objects)):
+            self._place_one(i, rot, a, b)
         shape = (len(self._robot_objects), len(self._obstacle_objects))
         dist = np.empty(shape)
         on_robot = np.empty(shape + (3,))
@@ -69,6 +101,53 @@ class CollisionModel:
             for j, obstacle_obj in enumerate(self._obstacle_objects):
                 dist[i, j], on_robot[i, j], on_obstacle[i, j] = _distance(robot_obj, obstacle_obj)
         return Distances(dist, on_robot, on_obstacle)
+
+    def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
+        and (if asked) its exact gradient with respect to ``q``, ``(n_obstacles, nv)``.
+
+        Bounds from the primitives' axes (vectorised) discard the primitives that cannot be the
+        closest; FCL measures the others. The gradient of the distance between a convex primitive
+        and a sphere of centre ``c`` is ``n . dp/dq``: ``n`` is the unit direction from ``c`` to
+        the obstacle's witness point, ``p`` the robot's witness point moving with its frame
+        (Pinocchio frame Jacobian).
+        """
+        q = np.asarray(q, dtype=float)
+        model, data = self.robot.model, self.robot.data
+        if derivatives:
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+        rot, a, b = self._axes(q, kinematics_done=derivatives)
+        placed = np.zeros(len(self._robot_objects), dtype=bool)
+        centers, radii = self._centers, self._radii
+        mid = 0.5 * (a + b)
+        to_mid = np.linalg.norm(centers[None, :, :] - mid[:, None, :], axis=2)  # (P, O)
+        pad = self._prim_radii[:, None] + radii[None, :]
+        upper = (to_mid - pad).min(axis=0)
+        lower = to_mid - 0.5 * self._prim_lengths[:, None] - pad
+        n_obs = len(self.obstacles)
+        dist = np.empty(n_obs)
+        grad = np.zeros((n_obs, self.robot.nv)) if derivatives else None
+        for j, obstacle_obj in enumerate(self._obstacle_objects):
+            best = (np.inf, -1, None, None)
+            for i in np.flatnonzero(lower[:, j] <= upper[j] + 1e-12):
+                if not placed[i]:
+                    self._place_one(i, rot, a, b)
+                    placed[i] = True
+                d, on_robot, on_obstacle = _distance(self._robot_objects[i], obstacle_obj)
+                if d < best[0]:
+                    best = (d, i, on_robot, on_obstacle)
+            dist[j], i, on_robot, on_obstacle = best
+            if derivatives:
+                fid = self._frame_ids[i]
+                jac = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+                normal = on_obstacle - centers[j]
+                normal /= math.sqrt(normal @ normal)
+                lever = on_robot - data.oMf[fid].translation
+                moment = (lever[1] * normal[2] - lever[2] * normal[1], lever[2] * normal[0] - lever[0] * normal[2],
+                          lever[0] * normal[1] - lever[1] * normal[0])  # lever x normal
+                grad[j] = normal @ jac[:3] + np.asarray(moment) @ jac[3:]
+        return dist, grad
 
     def min_distance(self, q: np.ndarray) -> float:
         """Smallest signed distance between the robot and any obstacle [m] (inf: no obstacle)."""

@@ -8,6 +8,7 @@ __all__ = [
     "CatalogError",
     "ScenarioError",
     "CompositionError",
+    "InfeasibleError",
 ]
 
 
@@ -33,3 +34,8 @@ class ScenarioError(InputError):
 
 class CompositionError(InputError):
     """A composition does not exist in the catalogue or breaks its grammar."""
+
+
+class InfeasibleError(ModularRobotsError):
+    """The task cannot be done: no composition (or not the one asked for) passes step B, or every
+    candidate's optimisation failed. The message says which test or failure decided it."""

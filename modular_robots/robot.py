@@ -110,6 +110,11 @@ class RobotModel:
         """Mass of every body, payload included [kg]."""
         return float(sum(inertia.mass for inertia in self.model.inertias))
 
+    def moving_primitives(self) -> tuple[int, ...]:
+        """Indices of the primitives that move with some joint (the others never change pose)."""
+        return tuple(i for i, fid in enumerate(self._primitive_frames)
+                     if self.model.frames[fid].parentJoint != 0)
+
     # -- kinematics -----------------------------------------------------------------------
     def tool_position(self, q: np.ndarray) -> np.ndarray:
         """Position of the tool point in the base frame [m]."""

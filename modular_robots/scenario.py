@@ -33,15 +33,18 @@ class Task:
 
 @dataclass(frozen=True)
 class OptimizerSettings:
-    """Step C settings: shooting nodes (intervals = nodes - 1), RK4 sub-steps per interval,
-    trust-constr iteration limit and tolerances, and the transcription."""
+    """Step C settings: shooting nodes (intervals = nodes - 1), integration sub-steps per interval,
+    trust-constr iteration limit and tolerances, the transcription, and the clearance [m] kept
+    from obstacles at the sub-steps (so that the motion between two sub-steps, which is not
+    checked by the solver, stays clear; verification checks it on a dense grid)."""
 
     nodes: int = 8
     substeps: int = 4
     max_iterations: int = 300
     tolerance: float = 1e-6
     constraint_tolerance: float = 1e-6
-    transcription: str = "forward"
+    transcription: str = "inverse"
+    clearance_margin: float = 0.02
 
 
 @dataclass(frozen=True)
@@ -124,13 +127,14 @@ def _read_optimizer(f: Fields | None) -> OptimizerSettings:
         return OptimizerSettings()
     d = OptimizerSettings()
     settings = OptimizerSettings(
-        nodes=f.integer("nodes", default=d.nodes, minimum=2),
+        nodes=f.integer("nodes", default=d.nodes, minimum=3),
         substeps=f.integer("substeps", default=d.substeps, minimum=1),
         max_iterations=f.integer("max_iterations", default=d.max_iterations, minimum=1),
         tolerance=f.number("tolerance", default=d.tolerance, exclusive_minimum=0.0),
         constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance,
                                       exclusive_minimum=0.0),
         transcription=f.string("transcription", default=d.transcription, choices=TRANSCRIPTIONS),
+        clearance_margin=f.number("clearance_margin", default=d.clearance_margin, minimum=0.0),
     )
     f.done()
     return settings

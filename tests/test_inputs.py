@@ -121,7 +121,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
          "task.speed: unknown key (expected one of: cost, goal, obstacles, payload, self_collision, start)"),
         ("  cost: time", "  cost: time\n  self_collision: true", "self_collision:",
          "task.self_collision: self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false"),
-        ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 2, got 1"),
+        ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 3, got 1"),
         ("threshold: 0.5", "threshold: half", "threshold:", "pruning.threshold: expected a number, got the string 'half'"),
         ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, none; got 'greedy'"),
         ("center: [1.5, -1.3, 1.1], radius: 0.30", "center: [0.1, 0.0, 0.0], radius: 0.30", "- sphere:",

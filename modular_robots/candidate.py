@@ -1,0 +1,200 @@
+"""One candidate's trajectory optimisation, from problem to verified result, as a generator.
+
+A :class:`Candidate` chains :class:`~modular_robots.solver.ShootingSolver` runs: it solves,
+verifies (:func:`~modular_robots.verification.verify`) and, when the re-integrated motion misses
+the goal by more than 1 cm or breaks a limit or the clearance between sub-steps, doubles the RK4
+sub-steps and solves again warm-started from the coarse solution (SPEC §5). Iteration numbers run
+on across refinements, so the pruning manager sees one sequence per candidate.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .catalog import Catalog
+from .composition import Composition
+from .exceptions import InfeasibleError
+from .feasibility import FeasibilitySettings, Verdict, check_composition
+from .robot import robot_model
+from .scenario import OptimizerSettings, Task
+from .shooting import ShootingProblem
+from .solver import Iterate, ShootingSolver
+from .verification import Verification, verify
+
+__all__ = ["Candidate", "CandidateResult", "composition_problem"]
+
+
+@dataclass(frozen=True)
+class CandidateResult:
+    """How one candidate's optimisation ended (SPEC §7's per-candidate record).
+
+    ``status``: ``optimal`` (converged and verified), ``failed``, ``stopped`` (closed early) or
+    ``pruned`` (set by the pruning manager). ``cost`` in its unit [s], ``tf`` [s],
+    ``cost_history`` the cost after every iteration, ``seconds`` spent in the solver and in
+    verification, ``y`` the last scaled decision vector.
+    """
+
+    name: str
+    dof: int
+    status: str
+    reason: str
+    iterations: int
+    seconds: float
+    cost: float
+    tf: float
+    constraint_violation: float
+    cost_history: tuple[float, ...] = ()
+    verification: Verification | None = None
+    substeps: int = 0
+    pruned_at_iteration: int | None = None
+    y: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def to_json(self) -> dict:
+        return {
+            "composition": self.name,
+            "dof": self.dof,
+            "status": self.status,
+            "reason": self.reason,
+            "iterations": self.iterations,
+            "seconds": round(self.seconds, 4),
+            "cost": _finite(self.cost),
+            "tf": _finite(self.tf),
+            "constraint_violation": _finite(self.constraint_violation),
+            "pruned_at_iteration": self.pruned_at_iteration,
+            "substeps": self.substeps,
+            "verification": self.verification.to_json() if self.verification else None,
+            "cost_history": [_finite(c) for c in self.cost_history],
+        }
+
+    def pruned(self, iteration: int) -> CandidateResult:
+        return replace(self, status="pruned", reason=f"pruned at iteration {iteration}",
+                       pruned_at_iteration=iteration)
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if value is not None and np.isfinite(value) else None
+
+
+class Candidate:
+    """Optimise ``problem`` to a verified trajectory, one solver iteration per ``next()``.
+
+    Parameters
+    ----------
+    problem
+        The shooting problem (its settings give tolerances and the iteration limit).
+    name
+        Shown in results (default: the robot's name).
+    max_refinements
+        How many times the sub-steps may be doubled after a failed verification.
+    jacobian
+        ``exact`` or ``finite-difference`` (see :class:`~modular_robots.solver.ShootingSolver`).
+    """
+
+    def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 2,
+                 jacobian: str = "exact"):
+        self.problem = problem
+        self.name = name or problem.robot.name
+        self.max_refinements = max_refinements
+        self.jacobian = jacobian
+        self.result: CandidateResult | None = None
+        self.history: list[float] = []
+        self.last: Iterate | None = None
+        self._generator: Iterator[Iterate] | None = None
+        self._seconds = 0.0
+
+    @property
+    def seconds(self) -> float:
+        """Seconds spent so far in the solver and in verification."""
+        return self._seconds
+
+    def iterate(self) -> Iterator[Iterate]:
+        """Yield an :class:`~modular_robots.solver.Iterate` per solver iteration; afterwards
+        :attr:`result` is set. Never raises for a failed optimisation."""
+        if self._generator is None:
+            self._generator = self._run()
+        return self._generator
+
+    def solve(self) -> CandidateResult:
+        for _ in self.iterate():
+            pass
+        return self.result
+
+    def close(self) -> None:
+        """Stop now; :attr:`result` records the last iterate with status ``stopped``."""
+        if self._generator is not None:
+            self._generator.close()
+        if self.result is None:
+            self._finish("stopped", "closed before convergence", self.problem, None)
+
+    def _run(self) -> Iterator[Iterate]:
+        problem, y0, offset = self.problem, None, 0
+        for attempt in range(self.max_refinements + 1):
+            solver = ShootingSolver(problem, y0, jacobian=self.jacobian, iteration_offset=offset)
+            try:
+                for it in solver.iterate():
+                    self.last = it
+                    self.history.append(it.cost)
+                    yield it
+            finally:
+                solver.close()
+                self._seconds += solver.outcome.seconds if solver.outcome else 0.0
+            outcome = solver.outcome
+            if outcome.final is not None:
+                self.last = outcome.final
+            if outcome.status != "optimal":
+                self._finish(outcome.status, outcome.reason, problem, None)
+                return
+            start = time.perf_counter()
+            verification = verify(problem, outcome.final.y)
+            self._seconds += time.perf_counter() - start
+            if verification.passed:
+                self._finish("optimal", outcome.reason, problem, verification)
+                return
+            if attempt == self.max_refinements:
+                break
+            problem, y0, offset = problem.refined(2 * problem.substeps), outcome.final.y, outcome.final.iteration
+        self._finish("failed", _verification_failure(verification), problem, verification)
+
+    def _finish(self, status: str, reason: str, problem: ShootingProblem, verification: Verification | None):
+        last = self.last
+        self.result = CandidateResult(
+            self.name, problem.nv, status, reason, last.iteration if last else 0, self._seconds,
+            last.cost if last else np.nan, last.tf if last else np.nan,
+            last.constraint_violation if last else np.nan, tuple(self.history), verification,
+            problem.substeps, None, last.y if last else None)
+        self.problem = problem
+
+
+def _verification_failure(v: Verification) -> str:
+    parts = []
+    if not v.terminal_ok:
+        parts.append(f"terminal error {v.terminal_error * 100:.2f} cm > 1 cm")
+    if not v.clearance_ok:
+        parts.append(f"clearance {v.min_clearance:.4f} m < 0 between sub-steps")
+    if not v.limits_ok:
+        parts.append(f"limits exceeded (velocity x{v.velocity_ratio:.3f}, torque x{v.torque_ratio:.3f}, "
+                     f"position +{v.position_excess:.2g})")
+    return f"verification failed after {v.substeps} sub-steps per interval: " + "; ".join(parts)
+
+
+def composition_problem(composition: Composition, catalog: Catalog, task: Task,
+                        settings: OptimizerSettings = OptimizerSettings(), verdict: Verdict | None = None,
+                        feasibility: FeasibilitySettings = FeasibilitySettings()) -> ShootingProblem:
+    """The shooting problem of ``composition`` for ``task``; its boundary configurations come from
+    step B's verdict (computed here if not given).
+
+    Raises
+    ------
+    InfeasibleError
+        If the composition is not feasible for the task (the verdict's message says why).
+    """
+    if verdict is None:
+        verdict = check_composition(composition, catalog, task, feasibility)
+    if not verdict.passed:
+        raise InfeasibleError(f"{composition.name} cannot do the task: {verdict.message}")
+    robot = robot_model(composition, catalog, task.payload)
+    return ShootingProblem(robot, verdict.q_start, verdict.q_goal, task.obstacles, task.cost, settings)

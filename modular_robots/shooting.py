@@ -1,0 +1,392 @@
+"""Step C: the minimum-time (or minimum-effort) optimal control problem of one robot, transcribed
+by direct multiple shooting (SPEC §5).
+
+Decision variables, scaled to order one: the final time ``tf``, the interior node states
+``s_1 .. s_{N-1}`` (``s_0`` and ``s_N`` are the fixed rest states at ``q_start`` and ``q_goal``)
+and one control per interval ``u_0 .. u_{N-1}``. Constraints: continuity ``Phi(s_m, u_m, tf) =
+s_{m+1}``; position and velocity limits at every integration sub-step (plain bounds at the
+nodes); obstacle clearance ``>= 0`` at every sub-step; torque limits (plain bounds when the
+controls are torques, else at every sub-step). Jacobians are exact and assembled sparse.
+
+The problem is a plain object: it evaluates cost, constraints and their derivatives; solving is
+:mod:`~modular_robots.solver`'s job.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+
+from .collision import CollisionModel, SphereObstacle
+from .exceptions import ModularRobotsError
+from .robot import RobotModel
+from .scenario import COSTS, OptimizerSettings
+from .transcription import Propagation, positive_or_one, transcription
+
+__all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
+
+
+#: Random via configurations tried when the straight-line guess hits an obstacle.
+GUESS_TRIALS = 48
+#: Clearance the initial guess keeps from every obstacle [m].
+GUESS_CLEARANCE = 0.02
+
+
+class NonFiniteError(ModularRobotsError, ArithmeticError):
+    """The dynamics produced NaN or infinite values at a trial point."""
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Everything the solver needs at one scaled point ``y`` (Jacobians only if asked)."""
+
+    cost: float
+    constraints: np.ndarray
+    propagation: Propagation
+    clearance: np.ndarray
+    cost_gradient: np.ndarray | None = None
+    jacobian: sparse.csr_matrix | None = None
+
+
+class ShootingProblem:
+    """Multiple-shooting transcription of "move ``robot`` from rest at ``q_start`` to rest at
+    ``q_goal``, clear of ``obstacles``, within its limits, minimising ``cost``".
+
+    Parameters
+    ----------
+    robot
+        Any :class:`~modular_robots.robot.RobotModel` (``nq == nv``); its model's position,
+        velocity [rad/s, m/s] and effort [N m, N] limits are the bounds, its collision primitives
+        that move are checked against the obstacles.
+    q_start, q_goal
+        Boundary configurations [rad or m]; the velocity is zero at both.
+    obstacles
+        Sphere obstacles in the base frame.
+    cost
+        ``time`` (``tf`` [s]) or ``effort`` (``integral of |tau / tau_max|^2 dt`` [s]).
+    settings
+        Nodes (intervals + 1), sub-steps per interval and the transcription.
+    substeps
+        Overrides ``settings.substeps`` (used by refinement).
+    waypoints
+        Joint-space path ``(K, nv)`` of the initial guess, from ``q_start`` to ``q_goal``
+        (default: see :meth:`_guess_path`).
+    """
+
+    def __init__(self, robot: RobotModel, q_start: Sequence[float], q_goal: Sequence[float],
+                 obstacles: Sequence[SphereObstacle] = (), cost: str = "time",
+                 settings: OptimizerSettings = OptimizerSettings(), substeps: int | None = None,
+                 waypoints: np.ndarray | None = None):
+        if robot.nq != robot.nv:
+            raise ValueError(f"robot {robot.name!r}: nq = {robot.nq} != nv = {robot.nv}; only joints "
+                             f"whose configuration is their coordinate (revolute, prismatic) are supported")
+        if settings.nodes < 3:
+            raise ValueError(f"nodes must be >= 3 (two or more intervals), got {settings.nodes}")
+        if cost not in COSTS:
+            raise ValueError(f"unknown cost {cost!r}; expected one of {list(COSTS)}")
+        self.robot = robot
+        self.settings = settings
+        self.cost_name = cost
+        self.obstacles = tuple(obstacles)
+        self.transcription = transcription(settings.transcription)
+        self.intervals = settings.nodes - 1
+        self.substeps = int(substeps or settings.substeps)
+        nv = self.nv = robot.nv
+        n = self.nx = 2 * nv
+        self.q_start = self._configuration(q_start, "q_start")
+        self.q_goal = self._configuration(q_goal, "q_goal")
+        self.collision = None
+        if self.obstacles and robot.moving_primitives():
+            self.collision = CollisionModel(robot, self.obstacles, robot.moving_primitives())
+            for label, q in (("q_start", self.q_start), ("q_goal", self.q_goal)):
+                if self.collision.min_distance(q) < 0.0:
+                    raise ValueError(f"{label} is in collision with an obstacle")
+        N, S = self.intervals, self.substeps
+        self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
+        self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
+
+        self.waypoints = self._guess_path() if waypoints is None else np.asarray(waypoints, dtype=float)
+        self.tf_guess, guess_nodes, guess_acc = self._initial_motion()
+        #: The cost in its unit [s] is the scaled cost times this.
+        self.cost_unit = self.tf_guess
+        lower, upper = robot.lower, robot.upper
+        q_scale = np.where(np.isfinite(upper - lower) & (upper > lower), (upper - lower) / 2.0, 1.0)
+        v_scale = positive_or_one(robot.velocity_limit)
+        self.x_scale = np.concatenate([q_scale, v_scale])
+        self.u_scale = self.transcription.control_scale(robot, self.tf_guess, N)
+        self.tau_scale = positive_or_one(robot.effort_limit)
+        self.n_variables = 1 + (N - 1) * n + N * nv
+        self._u0 = 1 + (N - 1) * n
+        self.variable_scale = np.concatenate([[self.tf_guess], np.tile(self.x_scale, N - 1),
+                                              np.tile(self.u_scale, N)])
+        guess_u = self.transcription.initial_controls(robot, guess_nodes[:-1, :nv], guess_nodes[:-1, nv:],
+                                                      guess_acc)
+        if self.transcription.controls_are_torques:
+            guess_u = np.clip(guess_u, -robot.effort_limit, robot.effort_limit)
+        self._guess = self.pack(self.tf_guess, guess_nodes, guess_u)
+        self._build_bounds()
+        self._build_pattern()
+        self._cache: tuple[bytes, Evaluation] | None = None
+
+    # -- layout --------------------------------------------------------------------------
+    def pack(self, tf: float, nodes: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        """Scaled decision vector from ``tf`` [s], all ``N + 1`` node states and ``N`` controls."""
+        z = np.concatenate([[tf], np.asarray(nodes)[1:-1].ravel(), np.asarray(controls).ravel()])
+        return z / self.variable_scale
+
+    def unpack(self, y: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(tf, nodes (N + 1, 2 nv), controls (N, nv))`` in SI units from a scaled vector."""
+        z = np.asarray(y, dtype=float) * self.variable_scale
+        inner = z[1:self._u0].reshape(self.intervals - 1, self.nx)
+        nodes = np.vstack([self.x_start, inner, self.x_goal])
+        return float(z[0]), nodes, z[self._u0:].reshape(self.intervals, self.nv)
+
+    def initial_guess(self) -> np.ndarray:
+        """Straight line in joint space (or a clear detour, see :meth:`_guess_path`), a trapezoidal
+        velocity profile, ``tf`` from the velocity limits (scaled)."""
+        return self._guess.copy()
+
+    def refined(self, substeps: int) -> ShootingProblem:
+        """The same problem with ``substeps`` per interval; decision vectors carry over as they are."""
+        return ShootingProblem(self.robot, self.q_start, self.q_goal, self.obstacles, self.cost_name,
+                               self.settings, substeps, self.waypoints)
+
+    def _configuration(self, q, label) -> np.ndarray:
+        q = np.asarray(q, dtype=float).reshape(-1)
+        if q.shape != (self.nv,) or not np.all(np.isfinite(q)):
+            raise ValueError(f"{label} must be {self.nv} finite joint values, got {q.tolist()}")
+        lo, hi = self.robot.lower, self.robot.upper
+        if np.any(q < lo - 1e-9) or np.any(q > hi + 1e-9):
+            raise ValueError(f"{label} = {np.round(q, 6).tolist()} is outside the joint limits")
+        return q
+
+    def _guess_path(self) -> np.ndarray:
+        """Joint-space waypoints of the initial guess: the straight line from ``q_start`` to
+        ``q_goal`` if it clears the obstacles, else the fastest clear detour through one seeded
+        random via configuration (a guess through an obstacle lets the solver settle on a motion
+        that jumps through it between two sub-steps; a clear guess starts on the right side)."""
+        straight = np.array([self.q_start, self.q_goal])
+        if self.collision is None or self._path_clear(straight):
+            return straight
+        rng = np.random.default_rng(0)
+        lo = np.where(np.isfinite(self.robot.lower), self.robot.lower, -np.pi)
+        hi = np.where(np.isfinite(self.robot.upper), self.robot.upper, np.pi)
+        best_time, best = np.inf, straight
+        for _ in range(GUESS_TRIALS):
+            path = np.array([self.q_start, rng.uniform(lo, hi), self.q_goal])
+            duration = self._path_time(path).sum()
+            if duration < best_time and self._path_clear(path):
+                best_time, best = duration, path
+        return best
+
+    def _path_time(self, path: np.ndarray) -> np.ndarray:
+        vmax = positive_or_one(self.robot.velocity_limit)
+        return np.max(np.abs(np.diff(path, axis=0)) / vmax, axis=1)
+
+    def _path_clear(self, path: np.ndarray, samples: int = 24) -> bool:
+        for a, b in zip(path[:-1], path[1:]):
+            for s in np.linspace(0.0, 1.0, samples + 1):
+                if self.collision.closest(a + s * (b - a))[0].min() < GUESS_CLEARANCE:
+                    return False
+        return True
+
+    def _initial_motion(self):
+        """``tf``, node states and node accelerations of the initial guess: the waypoint path
+        walked with a trapezoidal profile (one interval to speed up, one to stop), at a cruise
+        speed where the busiest joint moves at its velocity limit."""
+        N, nv = self.intervals, self.nv
+        path = self.waypoints
+        seg_time = self._path_time(path)
+        total = float(seg_time.sum())
+        tf = max(total * N / (N - 1), 1e-2)
+        h = tf / N
+        bounds = np.concatenate([[0.0], np.cumsum(seg_time)])
+        nodes = np.zeros((N + 1, 2 * nv))
+        for m in range(N + 1):
+            lam = min(h * np.clip(m - 0.5, 0.0, N - 1), total)
+            k = int(np.clip(np.searchsorted(bounds, lam, side="right") - 1, 0, len(seg_time) - 1))
+            slope = (path[k + 1] - path[k]) / seg_time[k] if seg_time[k] > 0 else np.zeros(nv)
+            nodes[m, :nv] = path[k] + slope * (lam - bounds[k])
+            nodes[m, nv:] = slope if 0 < m < N else 0.0
+        nodes[N, :nv] = self.q_goal
+        acc = np.diff(nodes[:, nv:], axis=0) / h
+        return tf, nodes, acc
+
+    # -- bounds and sparsity -----------------------------------------------------------------
+    def _build_bounds(self) -> None:
+        robot, N, nv = self.robot, self.intervals, self.nv
+        x_lo = np.concatenate([robot.lower, -robot.velocity_limit])
+        x_hi = np.concatenate([robot.upper, robot.velocity_limit])
+        if self.transcription.controls_are_torques:
+            u_lo, u_hi = -robot.effort_limit, robot.effort_limit
+        else:
+            u_lo, u_hi = np.full(nv, -np.inf), np.full(nv, np.inf)
+        lb = np.concatenate([[1e-3 * self.tf_guess], np.tile(x_lo, N - 1), np.tile(u_lo, N)])
+        ub = np.concatenate([[1e3 * self.tf_guess], np.tile(x_hi, N - 1), np.tile(u_hi, N)])
+        self.variable_lower = lb / self.variable_scale
+        self.variable_upper = ub / self.variable_scale
+        self._x_lo, self._x_hi = x_lo, x_hi
+
+    def _build_pattern(self) -> None:
+        """Row layout, bounds and the fixed sparsity pattern of the constraint Jacobian."""
+        N, S, n, nv = self.intervals, self.substeps, self.nx, self.nv
+        p = n + nv + 1
+        cols = np.empty((N, p), dtype=int)
+        for m in range(N):
+            cols[m, :n] = 1 + (m - 1) * n + np.arange(n) if m >= 1 else -1
+            cols[m, n:n + nv] = self._u0 + m * nv + np.arange(nv)
+            cols[m, -1] = 0
+        pairs = len(self.obstacles) if self.collision else 0
+        blocks = [("continuity", 1, n), ("path", S - 1, n), ("clearance", S, pairs)]
+        if not self.transcription.controls_are_torques:
+            blocks.append(("torque", S + 1, nv))
+        rows, lower, upper, scale = {}, [], [], []
+        start = 0
+        for name, k, r in blocks:
+            rows[name] = start + np.arange(N * k * r).reshape(N, k, r)
+            start += N * k * r
+            if name == "continuity":
+                lo = hi = np.zeros((N, k, r))
+                sc = np.broadcast_to(self.x_scale, (N, k, r))
+            elif name == "path":
+                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (self._x_lo, self._x_hi))
+                sc = np.broadcast_to(self.x_scale, (N, k, r))
+            elif name == "clearance":
+                lo, hi = np.full((N, k, r), self.settings.clearance_margin), np.full((N, k, r), np.inf)
+                sc = np.ones((N, k, r))
+            else:
+                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.robot.effort_limit,
+                                                                  self.robot.effort_limit))
+                sc = np.broadcast_to(self.tau_scale, (N, k, r))
+            lower.append(np.ravel(lo))
+            upper.append(np.ravel(hi))
+            scale.append(np.ravel(sc))
+        lower, upper, scale = (np.concatenate(v) for v in (lower, upper, scale))
+        self._rows = rows
+        self.row_scale = scale
+        # Entries in evaluation order: block local Jacobians, then continuity's -I on s_{m+1}.
+        entry_rows = [np.broadcast_to(rows[name][..., None], rows[name].shape + (p,)).ravel()
+                      for name, _, _ in blocks]
+        entry_cols = [np.broadcast_to(cols[:, None, None, :], rows[name].shape + (p,)).ravel()
+                      for name, _, _ in blocks]
+        next_cols = np.array([1 + m * n + np.arange(n) if m < N - 1 else np.full(n, -1) for m in range(N)])
+        entry_rows.append(rows["continuity"][:, 0, :].ravel())
+        entry_cols.append(next_cols.ravel())
+        entry_rows, entry_cols = np.concatenate(entry_rows), np.concatenate(entry_cols)
+        # Drop clearance rows of the fixed start point and rows without a finite bound.
+        keep_row = np.isfinite(lower) | np.isfinite(upper)
+        if pairs:
+            keep_row[rows["clearance"][0, 0]] = False
+        new_row = np.cumsum(keep_row) - 1
+        self._keep_row = keep_row
+        self._keep_entry = (entry_cols >= 0) & keep_row[entry_rows]
+        kept_rows, kept_cols = entry_rows[self._keep_entry], entry_cols[self._keep_entry]
+        self._entry_factor = self.variable_scale[kept_cols] / scale[kept_rows]
+        self._jac_rows, self._jac_cols = new_row[kept_rows], kept_cols
+        self.n_constraints = int(keep_row.sum())
+        self.constraint_lower = (lower / scale)[keep_row]
+        self.constraint_upper = (upper / scale)[keep_row]
+        self._equality = (self.constraint_lower == self.constraint_upper)
+
+    # -- evaluation ------------------------------------------------------------------------
+    def evaluate(self, y: np.ndarray, derivatives: bool = True) -> Evaluation:
+        """Cost, constraints (scaled) and, if ``derivatives``, their exact Jacobians at ``y``.
+
+        The last evaluation is cached, so the solver's separate calls share one propagation.
+        """
+        y = np.asarray(y, dtype=float)
+        key = y.tobytes()
+        if self._cache is not None and self._cache[0] == key and (
+                self._cache[1].jacobian is not None or not derivatives):
+            return self._cache[1]
+        N, S, n, nv = self.intervals, self.substeps, self.nx, self.nv
+        tf, nodes, controls = self.unpack(y)
+        prop = self.transcription.propagate(self.robot, nodes[:-1], controls, tf, N, S, derivatives)
+        if not (np.all(np.isfinite(prop.states)) and np.all(np.isfinite(prop.torques))):
+            raise NonFiniteError(f"the dynamics of {self.robot.name!r} gave non-finite states or torques "
+                                 f"(tf = {tf:.4g} s)")
+        clear_q = prop.states[:, :S, :nv].reshape(-1, nv)
+        clear, clear_grad = self._clearance(clear_q, derivatives)
+        values = [
+            (prop.states[:, S] - nodes[1:]).ravel(),
+            prop.states[:, 1:S].ravel(),
+            clear.ravel(),
+        ]
+        if not self.transcription.controls_are_torques:
+            values.append(prop.torques.ravel())
+        c = (np.concatenate(values) / self.row_scale)[self._keep_row]
+        cost, cost_grad = self._cost(tf, prop, derivatives)
+        jac = None
+        if derivatives:
+            blocks = [prop.state_sens[:, S], prop.state_sens[:, 1:S]]
+            if self.collision is not None:
+                q_sens = prop.state_sens[:, :S, :nv]
+                grad = clear_grad.reshape(N, S, -1, nv)
+                blocks.append(grad @ q_sens)
+            if not self.transcription.controls_are_torques:
+                blocks.append(prop.torque_sens)
+            blocks.append(np.full(N * n, -1.0))
+            data = np.concatenate([b.ravel() for b in blocks])[self._keep_entry] * self._entry_factor
+            jac = sparse.csr_matrix((data, (self._jac_rows, self._jac_cols)),
+                                    shape=(self.n_constraints, self.n_variables))
+        evaluation = Evaluation(cost, c, prop, clear, cost_grad, jac)
+        self._cache = (key, evaluation)
+        return evaluation
+
+    def _clearance(self, qs: np.ndarray, derivatives: bool):
+        if self.collision is None:
+            return np.zeros((len(qs), 0)), (np.zeros((len(qs), 0, self.nv)) if derivatives else None)
+        found = [self.collision.closest(q, derivatives) for q in qs]
+        dist = np.array([f[0] for f in found])
+        return dist, (np.array([f[1] for f in found]) if derivatives else None)
+
+    def _cost(self, tf: float, prop: Propagation, derivatives: bool):
+        grad = np.zeros(self.n_variables) if derivatives else None
+        if self.cost_name == "time":
+            if derivatives:
+                grad[0] = 1.0
+            return tf / self.tf_guess, grad
+        N, S = self.intervals, self.substeps
+        weights = np.full(S + 1, 1.0 / (N * S))
+        weights[[0, -1]] *= 0.5  # trapezoid in normalised time; dt = tf * weight
+        ratio = prop.torques / self.tau_scale
+        integrand = np.einsum("j,mjk->", weights, ratio**2)
+        cost = tf * integrand / self.tf_guess
+        if derivatives:
+            local = 2.0 * tf * np.einsum("j,mjk,mjkp->mp", weights, ratio / self.tau_scale, prop.torque_sens)
+            local[:, -1] += integrand
+            for m in range(N):
+                cols = self._interval_columns(m)
+                mask = cols >= 0
+                np.add.at(grad, cols[mask], local[m, mask])
+            grad *= self.variable_scale / self.tf_guess
+        return cost, grad
+
+    def _interval_columns(self, m: int) -> np.ndarray:
+        n, nv = self.nx, self.nv
+        state = 1 + (m - 1) * n + np.arange(n) if m >= 1 else np.full(n, -1)
+        return np.concatenate([state, self._u0 + m * nv + np.arange(nv), [0]])
+
+    # -- conveniences for the solver ----------------------------------------------------------
+    def cost(self, y: np.ndarray) -> float:
+        return self.evaluate(y, derivatives=False).cost
+
+    def cost_gradient(self, y: np.ndarray) -> np.ndarray:
+        return self.evaluate(y).cost_gradient
+
+    def constraints(self, y: np.ndarray) -> np.ndarray:
+        return self.evaluate(y, derivatives=False).constraints
+
+    def constraint_jacobian(self, y: np.ndarray) -> sparse.csr_matrix:
+        return self.evaluate(y).jacobian
+
+    def violation(self, y: np.ndarray) -> float:
+        """Largest scaled constraint or bound violation at ``y`` (0 when feasible)."""
+        c = self.constraints(y)
+        worst = max(np.max(self.constraint_lower - c, initial=0.0), np.max(c - self.constraint_upper, initial=0.0))
+        y = np.asarray(y, dtype=float)
+        worst_bound = max(np.max(self.variable_lower - y, initial=0.0), np.max(y - self.variable_upper, initial=0.0))
+        return float(max(worst, worst_bound))

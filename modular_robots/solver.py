@@ -1,0 +1,229 @@
+"""SciPy ``trust-constr`` on a :class:`~modular_robots.shooting.ShootingProblem`, one iteration at
+a time (SPEC §6).
+
+``trust-constr`` owns its loop, so it runs in a helper thread that hands control back after every
+iteration: :meth:`ShootingSolver.iterate` is a generator that yields an :class:`Iterate` per
+solver iteration, :meth:`ShootingSolver.close` stops the solver cleanly (its callback raises
+``StopIteration``) and joins the thread, and :meth:`ShootingSolver.solve` runs to the end. Only
+one of the two threads runs at any moment, so the problem's Pinocchio data is never shared.
+A solver failure never raises into the caller: the generator ends and :attr:`outcome` says why.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
+
+from .shooting import ShootingProblem
+
+__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES"]
+
+logger = logging.getLogger(__name__)
+
+#: ``optimal``: converged within tolerances; ``failed``: iteration limit, infeasible or
+#: non-finite; ``stopped``: closed by the caller.
+STATUSES = ("optimal", "failed", "stopped")
+
+
+@dataclass(frozen=True)
+class Iterate:
+    """The solver's state after one iteration.
+
+    ``cost`` in its unit (``tf`` [s] for ``time``, ``integral of |tau / tau_max|^2 dt`` [s] for
+    ``effort``), ``tf`` [s], ``constraint_violation`` the largest scaled violation (trust-constr's
+    measure), ``y`` the scaled decision vector.
+    """
+
+    iteration: int
+    cost: float
+    constraint_violation: float
+    tf: float
+    y: np.ndarray
+    optimality: float = float("nan")
+
+
+@dataclass(frozen=True)
+class SolverOutcome:
+    """How a solve ended: ``status`` (one of :data:`STATUSES`), a human ``reason``, the number of
+    iterations, the seconds spent inside the solver and the last iterate (None if none)."""
+
+    status: str
+    reason: str
+    iterations: int
+    seconds: float
+    final: Iterate | None
+
+    @property
+    def converged(self) -> bool:
+        return self.status == "optimal"
+
+
+class ShootingSolver:
+    """Solve ``problem`` with ``trust-constr`` (exact sparse Jacobians, SR1 Hessians).
+
+    Parameters
+    ----------
+    problem
+        The transcribed optimal control problem.
+    y0
+        Scaled starting point (default: the problem's straight-line guess).
+    max_iterations, tolerance, constraint_tolerance
+        Default to the problem's :class:`~modular_robots.scenario.OptimizerSettings`.
+    jacobian
+        ``exact`` (the product) or ``finite-difference`` (2-point; for checks and benchmarks).
+    iteration_offset
+        Added to reported iteration numbers (refinement continues a count).
+    """
+
+    def __init__(self, problem: ShootingProblem, y0: np.ndarray | None = None, *,
+                 max_iterations: int | None = None, tolerance: float | None = None,
+                 constraint_tolerance: float | None = None, jacobian: str = "exact",
+                 iteration_offset: int = 0):
+        if jacobian not in ("exact", "finite-difference"):
+            raise ValueError(f"jacobian must be 'exact' or 'finite-difference', got {jacobian!r}")
+        s = problem.settings
+        self.problem = problem
+        self.y0 = problem.initial_guess() if y0 is None else np.asarray(y0, dtype=float).copy()
+        self.max_iterations = max_iterations or s.max_iterations
+        self.tolerance = tolerance or s.tolerance
+        self.constraint_tolerance = constraint_tolerance or s.constraint_tolerance
+        self.jacobian = jacobian
+        self.iteration_offset = iteration_offset
+        self.outcome: SolverOutcome | None = None
+        self.last: Iterate | None = None
+        self._started = False
+        self._thread: threading.Thread | None = None
+        self._to_caller: queue.Queue = queue.Queue()
+        self._resume = threading.Semaphore(0)
+        self._stop = False
+        self._seconds = 0.0
+
+    # -- public ------------------------------------------------------------------------------
+    def iterate(self) -> Iterator[Iterate]:
+        """Yield one :class:`Iterate` per solver iteration; afterwards :attr:`outcome` is set."""
+        if self._started:
+            raise RuntimeError("a ShootingSolver iterates once; create a new one to solve again")
+        self._started = True
+        self._thread = threading.Thread(target=self._run, name="trust-constr", daemon=True)
+        self._thread.start()
+        try:
+            while True:
+                message = self._to_caller.get()
+                if isinstance(message, SolverOutcome):
+                    self.outcome = message
+                    return
+                self.last = message
+                yield message
+                self._resume.release()
+        finally:
+            self._shutdown()
+
+    def close(self) -> None:
+        """Stop the solver (if running) and free its thread; :attr:`outcome` becomes ``stopped``."""
+        if self._thread is None:
+            self._started = True
+            if self.outcome is None:
+                self.outcome = SolverOutcome("stopped", "closed before the first iteration", 0, 0.0, None)
+            return
+        self._shutdown()
+
+    def solve(self) -> SolverOutcome:
+        """Run to the end and return the :class:`SolverOutcome`."""
+        for _ in self.iterate():
+            pass
+        return self.outcome
+
+    # -- internals ---------------------------------------------------------------------------
+    def _shutdown(self) -> None:
+        thread = self._thread
+        if thread is None or not thread.is_alive():
+            return
+        self._stop = True
+        self._resume.release()
+        while True:
+            message = self._to_caller.get()
+            if isinstance(message, SolverOutcome):
+                self.outcome = message
+                break
+            self._resume.release()
+        thread.join()
+
+    def _callback(self, intermediate_result) -> bool:
+        state = intermediate_result  # scipy passes the new-style result only under this name
+        self._seconds += time.perf_counter() - self._clock
+        problem = self.problem
+        y = np.array(state.x, dtype=float)
+        tf = float(y[0] * problem.variable_scale[0])
+        iterate = Iterate(self.iteration_offset + int(state.nit), float(state.fun) * problem.cost_unit,
+                          float(state.constr_violation), tf, y, float(state.optimality))
+        self._to_caller.put(iterate)
+        self._resume.acquire()
+        self._clock = time.perf_counter()
+        if self._stop:
+            raise StopIteration
+        return False
+
+    def _run(self) -> None:
+        problem = self.problem
+        self._clock = time.perf_counter()
+        try:
+            result = self._minimize()
+        except Exception as exc:  # noqa: BLE001 - a failed candidate must not kill the caller
+            logger.debug("solver for %s failed", problem.robot.name, exc_info=True)
+            self._finish("failed", f"{type(exc).__name__}: {exc}")
+            return
+        violation = float(result.constr_violation)
+        if result.status == 3:
+            self._finish("stopped", "closed by the caller", result)
+        elif not np.all(np.isfinite(result.x)):
+            self._finish("failed", "non-finite decision variables", result)
+        elif result.status == 0:
+            self._finish("failed", f"iteration limit ({self.max_iterations}) reached, constraint "
+                                   f"violation {violation:.2g}", result)
+        elif violation > self.constraint_tolerance:
+            self._finish("failed", f"infeasible: the solver stopped ({result.message}) with constraint "
+                                   f"violation {violation:.2g}", result)
+        else:
+            self._finish("optimal", str(result.message), result)
+
+    def _finish(self, status: str, reason: str, result=None) -> None:
+        self._seconds += time.perf_counter() - self._clock
+        final = self.last
+        if result is not None and (final is None or final.iteration != self.iteration_offset + result.nit):
+            y = np.array(result.x, dtype=float)
+            final = Iterate(self.iteration_offset + int(result.nit), float(result.fun) * self.problem.cost_unit,
+                            float(result.constr_violation), float(y[0] * self.problem.variable_scale[0]), y,
+                            float(result.optimality))
+        iterations = final.iteration - self.iteration_offset if final is not None else 0
+        self._to_caller.put(SolverOutcome(status, reason, iterations, self._seconds, final))
+
+    def _minimize(self):
+        problem = self.problem
+        exact = self.jacobian == "exact"
+        n = problem.n_variables
+        zero = sparse.csr_matrix((n, n))
+        objective_hessian = (lambda y: zero) if exact and problem.cost_name == "time" else SR1()
+        constraint = NonlinearConstraint(
+            problem.constraints, problem.constraint_lower, problem.constraint_upper,
+            jac=problem.constraint_jacobian if exact else "2-point", hess=SR1())
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # delta_grad == 0 and similar SR1 notes
+            return minimize(
+                problem.cost, self.y0, method="trust-constr",
+                jac=problem.cost_gradient if exact else "2-point",
+                hess=objective_hessian,
+                bounds=Bounds(problem.variable_lower, problem.variable_upper),
+                constraints=[constraint],
+                callback=self._callback,
+                options={"maxiter": self.max_iterations, "gtol": self.tolerance, "xtol": self.tolerance,
+                         "barrier_tol": self.tolerance, "sparse_jacobian": True, "verbose": 0},
+            )
