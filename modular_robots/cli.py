@@ -6,6 +6,7 @@ import functools
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -14,7 +15,10 @@ from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import ModularRobotsError
 from .execution import make_engine
 from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, filter_compositions
-from .scenario import load_scenario, load_scenario_or_catalog
+from .candidate import Candidate, composition_problem
+from .feasibility import check_composition
+from .report import RESULT, ResultsFolder, result_document, settings_json, winner_json
+from .scenario import TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
 
 __all__ = ["main"]
@@ -113,6 +117,88 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None)
         click.echo(f"wrote {out}")
     if not summary.survivors:
         raise click.ClickException(summary.diagnosis())
+
+
+@main.command("optimize")
+@click.argument("composition")
+@click.option("--scenario", "scenario_path", type=_existing_file, required=True, help="Scenario file.")
+@click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Results folder (created if missing).")
+@click.option("--transcription", type=click.Choice(TRANSCRIPTIONS), default=None,
+              help="Override the scenario's transcription.")
+@click.option("--max-iterations", type=click.IntRange(min=1), default=None,
+              help="Override the scenario's iteration limit.")
+@_user_errors
+def optimize_command(composition: str, scenario_path: Path, out: Path, transcription: str | None,
+                     max_iterations: int | None) -> None:
+    """Step C for one COMPOSITION: a verified minimum-cost trajectory and its results folder."""
+    scenario = load_scenario(scenario_path)
+    overrides = {k: v for k, v in (("transcription", transcription), ("max_iterations", max_iterations)) if v}
+    scenario = replace(scenario, optimizer=replace(scenario.optimizer, **overrides))
+    chain = Composition.from_name(composition, scenario.catalog)
+    start = time.perf_counter()
+    verdict = check_composition(chain, scenario.catalog, scenario.task)
+    feasibility_seconds = time.perf_counter() - start
+    problem = composition_problem(chain, scenario.catalog, scenario.task, scenario.optimizer, verdict)
+    candidate = Candidate(problem, chain.name)
+    folder = ResultsFolder(out)
+    counts = {"enumerated": 1, "feasible": 1, "optimized": 1, "pruned": 0}
+
+    def document(status, partial, winner=None, message=""):
+        results = [candidate.result] if candidate.result else []
+        return result_document(scenario, settings_json(scenario, rule="single composition"), counts,
+                               {"feasibility": feasibility_seconds, "optimization": candidate.seconds},
+                               results, winner, time.perf_counter() - start, partial, status, message)
+
+    folder.write_result(document("running", True))
+    try:
+        with _LiveLine() as live:
+            for it in candidate.iterate():
+                live.show(f"{chain.name}: iteration {it.iteration}  {scenario.task.cost} {it.cost:.4g}  "
+                          f"tf {it.tf:.3f} s  violation {it.constraint_violation:.1e}")
+    except KeyboardInterrupt:
+        candidate.close()
+        folder.write_result(document("interrupted", True, message="interrupted by the user"))
+        raise
+    result = candidate.result
+    if result.status != "optimal":
+        folder.write_result(document("failed", False, message=result.reason))
+        raise click.ClickException(f"{chain.name}: {result.reason} (see {folder.file(RESULT)})")
+    files = folder.write_winner(candidate.problem, result)
+    folder.write_result(document("done", False, winner_json(result, files)))
+    v = result.verification
+    click.echo(f"{chain.name}: tf = {result.tf:.4f} s, cost {result.cost:.4g}, {result.iterations} iterations, "
+               f"{result.seconds:.2f} s, {result.substeps} sub-steps per interval")
+    click.echo(f"verified: terminal error {v.terminal_error * 1000:.3f} mm, min clearance {v.min_clearance:.4f} m, "
+               f"velocity {v.velocity_ratio:.3f} x limit, torque {v.torque_ratio:.3f} x limit")
+    click.echo(f"wrote {', '.join(str(folder.file(f)) for f in [RESULT, *files.values()])}")
+
+
+class _LiveLine:
+    """One status line on stderr, rewritten in place on a terminal (every 10th update otherwise)."""
+
+    def __init__(self):
+        self.tty = sys.stderr.isatty()
+        self.count = 0
+        self.text = ""
+
+    def __enter__(self):
+        return self
+
+    def show(self, text: str) -> None:
+        self.count += 1
+        self.text = text
+        if self.tty:
+            click.echo(f"\r\033[K{text}", nl=False, err=True)
+        elif self.count % 10 == 1:
+            click.echo(text, err=True)
+
+    def __exit__(self, *exc):
+        if self.tty and self.count:
+            click.echo("", err=True)
+        elif self.text and self.count % 10 != 1:
+            click.echo(self.text, err=True)
+        return False
 
 
 def _feasibility_table(summary: FeasibilitySummary) -> str:
