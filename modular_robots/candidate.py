@@ -173,6 +173,8 @@ def _verification_failure(v: Verification) -> str:
     parts = []
     if not v.terminal_ok:
         parts.append(f"terminal error {v.terminal_error * 100:.2f} cm > 1 cm")
+    if not v.defect_ok:
+        parts.append(f"defect {v.max_defect:.2g} between an interval's re-integration and the next node")
     if not v.clearance_ok:
         parts.append(f"clearance {v.min_clearance:.4f} m < 0 between sub-steps")
     if not v.limits_ok:

@@ -173,11 +173,11 @@ class RobotModel:
 
     def gravity(self, q) -> np.ndarray:
         """Static joint torques/forces that hold ``q`` against gravity (payload included)."""
-        return pin.computeGeneralizedGravity(self.model, self.data, q).copy()
+        return pin.computeGeneralizedGravity(self.model, self.data, np.asarray(q, dtype=float)).copy()
 
     def mass_matrix(self, q) -> np.ndarray:
         """Joint-space mass matrix ``M(q)`` (symmetric)."""
-        m = pin.crba(self.model, self.data, q)
+        m = pin.crba(self.model, self.data, np.asarray(q, dtype=float))
         return np.triu(m) + np.triu(m, 1).T
 
 

@@ -353,11 +353,11 @@ class ShootingProblem:
         weights = np.full(S + 1, 1.0 / (N * S))
         weights[[0, -1]] *= 0.5  # trapezoid in normalised time; dt = tf * weight
         ratio = prop.torques / self.tau_scale
-        integrand = np.einsum("j,mjk->", weights, ratio**2)
-        cost = tf * integrand / self.tf_guess
+        per_interval = np.einsum("j,mjk->m", weights, ratio**2)
+        cost = tf * per_interval.sum() / self.tf_guess
         if derivatives:
             local = 2.0 * tf * np.einsum("j,mjk,mjkp->mp", weights, ratio / self.tau_scale, prop.torque_sens)
-            local[:, -1] += integrand
+            local[:, -1] += per_interval
             for m in range(N):
                 cols = self._interval_columns(m)
                 mask = cols >= 0

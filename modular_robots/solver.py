@@ -110,19 +110,23 @@ class ShootingSolver:
     # -- public ------------------------------------------------------------------------------
     def iterate(self) -> Iterator[Iterate]:
         """Yield one :class:`Iterate` per solver iteration; afterwards :attr:`outcome` is set."""
+        if self._thread is None and self.outcome is not None:  # closed before it started
+            return
         if self._started:
             raise RuntimeError("a ShootingSolver iterates once; create a new one to solve again")
         self._started = True
         self._thread = threading.Thread(target=self._run, name="trust-constr", daemon=True)
         self._thread.start()
         try:
-            while True:
+            while self.outcome is None:
                 message = self._to_caller.get()
                 if isinstance(message, SolverOutcome):
                     self.outcome = message
                     return
                 self.last = message
                 yield message
+                if self.outcome is not None:  # closed while suspended
+                    return
                 self._resume.release()
         finally:
             self._shutdown()

@@ -28,6 +28,8 @@ __all__ = ["Verification", "Trajectory", "verify", "sample_trajectory", "TERMINA
 
 #: Largest terminal tool-position error accepted without refinement [m] (SPEC §5: 1 cm).
 TERMINAL_TOLERANCE = 0.01
+#: Largest scaled defect between a re-integrated interval and the next node (discretisation error).
+DEFECT_TOLERANCE = 1e-3
 #: Relative excess over a velocity or torque limit still counted as "held" on the dense grid.
 LIMIT_TOLERANCE = 1e-3
 #: Penetration still counted as clear on the dense grid [m] (solver tolerance, not physics).
@@ -70,8 +72,12 @@ class Verification:
         return self.min_clearance >= -CLEARANCE_TOLERANCE
 
     @property
+    def defect_ok(self) -> bool:
+        return self.max_defect <= DEFECT_TOLERANCE
+
+    @property
     def passed(self) -> bool:
-        return self.terminal_ok and self.limits_ok and self.clearance_ok
+        return self.terminal_ok and self.defect_ok and self.limits_ok and self.clearance_ok
 
     def to_json(self) -> dict:
         out = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(self).items()}
