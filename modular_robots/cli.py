@@ -18,7 +18,8 @@ from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, fi
 from .candidate import Candidate, composition_problem
 from .feasibility import check_composition
 from .report import RESULT, ResultsFolder, result_document, settings_json, winner_json
-from .scenario import TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
+from .pipeline import run_scenario, with_pruning
+from .scenario import RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
 
 __all__ = ["main"]
@@ -172,6 +173,57 @@ def optimize_command(composition: str, scenario_path: Path, out: Path, transcrip
     click.echo(f"verified: terminal error {v.terminal_error * 1000:.3f} mm, min clearance {v.min_clearance:.4f} m, "
                f"velocity {v.velocity_ratio:.3f} x limit, torque {v.torque_ratio:.3f} x limit")
     click.echo(f"wrote {', '.join(str(folder.file(f)) for f in [RESULT, *files.values()])}")
+
+
+@main.command("run")
+@click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
+@click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              show_default="results/<scenario name>", help="Results folder (created if missing).")
+@click.option("--rule", type=click.Choice(RULES), default=None, help="Override the scenario's pruning rule.")
+@click.option("--threshold", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Override the ratio rule's threshold.")
+@click.option("--jobs", "-j", type=click.IntRange(min=0), default=0, show_default="all cores",
+              help="Worker processes (1: run in this process).")
+@_user_errors
+def run_command(scenario_path: Path, out: Path | None, rule: str | None, threshold: float | None, jobs: int) -> None:
+    """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
+    scenario = with_pruning(load_scenario(scenario_path), rule, threshold)
+    out = out or Path("results") / scenario.name
+    click.echo(f"{scenario.name}: rule {scenario.pruning.rule}"
+               + (f" (threshold {scenario.pruning.threshold:g} from iteration {scenario.pruning.start_iteration})"
+                  if scenario.pruning.rule == "ratio" else "") + f"; results in {out}", err=True)
+    with _LiveLine() as live:
+        def progress(stage, f):
+            if stage == "feasibility":
+                if f["checked"] % 50 == 0:
+                    live.show(f"steps A+B: {f['checked']} compositions checked, {f['feasible']} feasible")
+            else:
+                best = "-" if f["best_cost"] is None else f"{f['best_cost']:.4g}"
+                live.show(f"steps C+D: iteration {f['round']}, {f['alive']} of {f['total']} alive, best cost {best}")
+
+        result = run_scenario(scenario, out, jobs, on_progress=progress)
+    click.echo(_run_table(result, scenario))
+    click.echo(f"wrote {out}/ (result.json, winner.urdf, trajectory.csv, joints.png, pruning.png)")
+
+
+def _run_table(result, scenario) -> str:
+    w = result.winner
+    statuses = [c.status for c in result.candidates]
+    v = w.verification
+    rows = [
+        ("winner", w.name),
+        ("tf [s]", f"{w.tf:.4f}"),
+        (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
+        ("verification", f"terminal error {v.terminal_error * 1000:.3f} mm, min clearance "
+                         f"{v.min_clearance:.4f} m, {w.substeps} sub-steps"),
+        ("compositions", f"{result.feasibility.checked} enumerated, {len(result.feasibility.survivors)} feasible"),
+        ("candidates", f"{len(statuses)} optimised: {statuses.count('optimal')} optimal, "
+                       f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed"),
+        ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),
+        ("wall time [s]", ", ".join(f"{k} {s:.1f}" for k, s in result.seconds.items())),
+    ]
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {value}" for k, value in rows)
 
 
 class _LiveLine:

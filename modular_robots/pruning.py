@@ -1,0 +1,287 @@
+"""Step D: advance every candidate's optimisation in lockstep and prune the clearly worse ones
+(SPEC §6).
+
+One *round* advances every live candidate by one solver iteration, then applies the rule to all
+of them. The rules are plain functions of the round's costs:
+
+* ``none`` (brute force) never prunes;
+* ``ratio`` (the paper's) prunes candidate ``k`` at iteration ``l >= start_iteration`` when
+  ``(c_k - c_ref) / c_ref > threshold``.
+
+**The guard.** A cost read at an infeasible iterate can be far too low (a minimum-time iterate
+that still cuts through an obstacle or breaks continuity is "fast"), and pruning against it would
+discard the true winner. So the reference ``c_ref`` is the smallest cost among *trusted* iterates
+only: a candidate that has converged (its verified cost), or a live one whose constraint
+violation is at most ``guard_violation``. While no iterate is trusted, nobody is pruned. The
+same holds for the other side of the comparison: a candidate is pruned only on a trusted cost of
+its own, because trust-constr typically lengthens ``tf`` while it restores feasibility and
+shortens it afterwards (measured on the small test scenario: the eventual winner went from 1.57 s
+to 3.44 s and back to 1.57 s, and the unguarded rule pruned it at 3.44 s). A candidate that has
+converged is never pruned.
+
+Where the candidates run is an :class:`Executor`'s business (this process, or worker processes
+that each host several candidates and advance them on command), so the lockstep and the pruning
+decisions do not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from .candidate import Candidate, CandidateResult
+from .scenario import PruningSettings
+from .solver import Iterate
+
+__all__ = ["Progress", "Executor", "InProcessExecutor", "ProcessExecutor", "PruningManager", "ratio_rule", "reference_cost",
+           "GUARD_VIOLATION"]
+
+#: Largest scaled constraint violation of an iterate trusted as the pruning reference.
+GUARD_VIOLATION = 1e-3
+
+
+def reference_cost(costs: Mapping[str, float], violations: Mapping[str, float],
+                   converged: Mapping[str, float], guard_violation: float = GUARD_VIOLATION) -> float | None:
+    """The guarded reference: the smallest converged cost or cost of a live iterate whose
+    violation is ``<= guard_violation``; None when nothing is trusted yet."""
+    trusted = [c for k, c in costs.items() if violations[k] <= guard_violation]
+    trusted += list(converged.values())
+    return min(trusted) if trusted else None
+
+
+def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], converged: Mapping[str, float],
+               iteration: int, threshold: float = 0.5, start_iteration: int = 2,
+               guard_violation: float = GUARD_VIOLATION) -> set[str]:
+    """Names of the live candidates (keys of ``costs``) to prune after round ``iteration``: those
+    whose own iterate is trusted and whose cost exceeds the guarded reference by more than
+    ``threshold`` (relative)."""
+    if iteration < start_iteration:
+        return set()
+    reference = reference_cost(costs, violations, converged, guard_violation)
+    if reference is None or reference <= 0.0:
+        return set()
+    return {k for k, c in costs.items()
+            if violations[k] <= guard_violation and (c - reference) / reference > threshold}
+
+
+@dataclass(frozen=True)
+class Progress:
+    """After each round: its number, the candidates still live, the best trusted cost so far
+    (None before any), and who was pruned or finished in this round."""
+
+    round: int
+    alive: int
+    best_cost: float | None
+    pruned: tuple[str, ...] = ()
+    finished: tuple[str, ...] = ()
+
+
+class Executor(Protocol):
+    """Hosts the candidates and advances them on command (one solver iteration each)."""
+
+    def names(self) -> list[str]: ...
+
+    def advance(self, names: Sequence[str]) -> dict[str, Iterate | CandidateResult]:
+        """One iteration of each named candidate: its new iterate, or its result if it ended."""
+        ...
+
+    def stop(self, names: Sequence[str]) -> dict[str, CandidateResult]:
+        """Close the named candidates and return their results (status ``stopped``)."""
+        ...
+
+    def shutdown(self) -> None: ...
+
+
+def _advance(candidates: dict, iterators: dict, names) -> dict:
+    out = {}
+    for name in names:
+        try:
+            out[name] = next(iterators[name])
+        except StopIteration:
+            out[name] = candidates[name].result
+    return out
+
+
+def _stop(candidates: dict, names) -> dict:
+    out = {}
+    for name in names:
+        candidates[name].close()
+        out[name] = candidates[name].result
+    return out
+
+
+class InProcessExecutor:
+    """The candidates as generators in this process: ``factory(context, spec)`` builds one
+    :class:`~modular_robots.candidate.Candidate` per spec, when first advanced."""
+
+    def __init__(self, factory: Callable[[Any, Any], Candidate], context: Any, specs: Sequence[Any],
+                 names: Sequence[str]):
+        self._names = list(names)
+        self._pending = dict(zip(self._names, specs))
+        self._factory, self._context = factory, context
+        self._candidates: dict[str, Candidate] = {}
+        self._iterators: dict = {}
+
+    def names(self) -> list[str]:
+        return list(self._names)
+
+    def _build(self, names) -> None:
+        for name in names:
+            if name not in self._candidates:
+                self._candidates[name] = candidate = self._factory(self._context, self._pending.pop(name))
+                self._iterators[name] = candidate.iterate()
+
+    def advance(self, names):
+        self._build(names)
+        return _advance(self._candidates, self._iterators, names)
+
+    def stop(self, names):
+        self._build(names)
+        return _stop(self._candidates, names)
+
+    def shutdown(self) -> None:
+        for candidate in self._candidates.values():
+            if candidate.result is None:
+                candidate.close()
+
+
+def _worker(conn, factory, context, specs, names) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop (Ctrl-C)
+    executor = InProcessExecutor(factory, context, specs, names)
+    try:
+        while True:
+            command, names = conn.recv()
+            if command == "advance":
+                conn.send(executor.advance(names))
+            elif command == "stop":
+                conn.send(executor.stop(names))
+            else:
+                break
+    except (EOFError, KeyboardInterrupt):
+        pass
+    finally:
+        executor.shutdown()
+        conn.close()
+
+
+class ProcessExecutor:
+    """Worker processes that each host a fixed share of the candidates (round robin) and advance
+    them on command, so the lockstep holds across processes. A distributed engine only has to
+    offer the same four methods."""
+
+    def __init__(self, factory: Callable[[Any, Any], Candidate], context: Any, specs: Sequence[Any],
+                 names: Sequence[str], jobs: int):
+        self._names = list(names)
+        jobs = max(1, min(jobs, len(self._names)))
+        ctx = multiprocessing.get_context()
+        self._owner = {name: i % jobs for i, name in enumerate(self._names)}
+        self._conns, self._procs = [], []
+        for w in range(jobs):
+            mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
+            parent, child = ctx.Pipe()
+            proc = ctx.Process(target=_worker, args=(child, factory, context, [specs[i] for i in mine],
+                                                     [self._names[i] for i in mine]), daemon=True)
+            proc.start()
+            child.close()
+            self._conns.append(parent)
+            self._procs.append(proc)
+
+    def names(self) -> list[str]:
+        return list(self._names)
+
+    def _command(self, command: str, names) -> dict:
+        by_worker: dict[int, list[str]] = {}
+        for name in names:
+            by_worker.setdefault(self._owner[name], []).append(name)
+        for w, mine in by_worker.items():
+            self._conns[w].send((command, mine))
+        out = {}
+        for w in by_worker:
+            out.update(self._conns[w].recv())
+        return out
+
+    def advance(self, names):
+        return self._command("advance", names)
+
+    def stop(self, names):
+        return self._command("stop", names)
+
+    def shutdown(self) -> None:
+        for conn in self._conns:
+            try:
+                conn.send(("exit", []))
+            except (BrokenPipeError, OSError):
+                pass
+        for proc in self._procs:
+            proc.join(timeout=10)
+            if proc.is_alive():
+                proc.terminate()
+
+
+@dataclass
+class PruningManager:
+    """Run the candidates of ``executor`` in lockstep under ``settings`` (see the module docstring).
+
+    :meth:`rounds` is a generator of :class:`Progress`; afterwards :attr:`results` holds one
+    :class:`~modular_robots.candidate.CandidateResult` per candidate, in the executor's order.
+    """
+
+    executor: Executor
+    settings: PruningSettings = field(default_factory=PruningSettings)
+    guard_violation: float = GUARD_VIOLATION
+    results: dict[str, CandidateResult] = field(default_factory=dict)
+    last: dict[str, Iterate] = field(default_factory=dict)
+
+    def rounds(self) -> Iterator[Progress]:
+        order = self.executor.names()
+        alive = list(order)
+        converged: dict[str, float] = {}
+        round_ = 0
+        try:
+            while alive:
+                round_ += 1
+                stepped = self.executor.advance(alive)
+                finished = []
+                for name in alive:
+                    value = stepped[name]
+                    if isinstance(value, CandidateResult):
+                        self.results[name] = value
+                        finished.append(name)
+                        if value.status == "optimal":
+                            converged[name] = value.cost
+                    else:
+                        self.last[name] = value
+                alive = [n for n in alive if n not in self.results]
+                pruned = self._prune(alive, converged, round_)
+                if pruned:
+                    for name, result in self.executor.stop(pruned).items():
+                        self.results[name] = result.pruned(round_)
+                    alive = [n for n in alive if n not in pruned]
+                best = reference_cost({n: self.last[n].cost for n in alive if n in self.last},
+                                      {n: self.last[n].constraint_violation for n in alive if n in self.last},
+                                      converged, self.guard_violation)
+                yield Progress(round_, len(alive), best, tuple(sorted(pruned)), tuple(finished))
+        finally:
+            if alive:
+                for name, result in self.executor.stop(alive).items():
+                    self.results.setdefault(name, result)
+            self.executor.shutdown()
+        self.results = {name: self.results[name] for name in order}
+
+    def run(self) -> list[CandidateResult]:
+        for _ in self.rounds():
+            pass
+        return list(self.results.values())
+
+    def _prune(self, alive: list[str], converged: dict[str, float], round_: int) -> list[str]:
+        if self.settings.rule == "none":
+            return []
+        live = [n for n in alive if n in self.last]
+        costs = {n: self.last[n].cost for n in live}
+        violations = {n: self.last[n].constraint_violation for n in live}
+        chosen = ratio_rule(costs, violations, converged, round_, self.settings.threshold,
+                            self.settings.start_iteration, self.guard_violation)
+        return [n for n in alive if n in chosen]
