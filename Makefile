@@ -14,11 +14,10 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
-# Runs the pipeline as far as it is built (steps A and B); `run` replaces this with issue 5.
+# Steps A to E on the paper's task with a 5 kg payload; the results folder is results/paper-5kg/.
 run: install
-	mkdir -p results/paper-5kg
-	$(VENV)/bin/modular-robots enumerate scenarios/paper-5kg.yaml --count
-	$(VENV)/bin/modular-robots filter scenarios/paper-5kg.yaml --out results/paper-5kg/feasible.json
+	$(VENV)/bin/modular-robots run scenarios/paper-5kg.yaml --out results/paper-5kg
+	@echo "results: $(CURDIR)/results/paper-5kg/ (result.json, winner.urdf, trajectory.csv, joints.png, pruning.png)"
 
 test: install
 	$(PY) -m pytest -q

@@ -1,7 +1,13 @@
-"""Run every benchmark: ``python -m benchmarks`` (``make bench``)."""
+"""Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
+runs only those (models, feasibility, ocp, pruning). RESULTS.md is rewritten at the end."""
 
-from . import bench_feasibility, bench_models
+import sys
 
-for bench in (bench_models, bench_feasibility):
-    print(f"== {bench.__name__} ==")
-    bench.main()
+from . import bench_feasibility, bench_models, bench_ocp, bench_pruning, results_md
+
+BENCHES = {"models": bench_models, "feasibility": bench_feasibility, "ocp": bench_ocp, "pruning": bench_pruning}
+
+for name in sys.argv[1:] or list(BENCHES):
+    print(f"== {name} ==")
+    BENCHES[name].main()
+results_md.main()

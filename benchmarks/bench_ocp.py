@@ -1,0 +1,130 @@
+"""Step C on paper-5kg: per-candidate solve time (median of 3), iterations, tf and verification
+for a set of feasible compositions in both transcriptions; the share of all step-B survivors
+that converge; exact vs finite-difference Jacobians on one small case."""
+
+from __future__ import annotations
+
+import statistics
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from modular_robots import load_scenario
+from modular_robots.candidate import Candidate, composition_problem
+from modular_robots.execution import ProcessEngine, available_cores
+from modular_robots.feasibility import filter_compositions
+from modular_robots.robot import RobotModel
+from modular_robots.scenario import OptimizerSettings
+from modular_robots.shooting import ShootingProblem
+from modular_robots.solver import ShootingSolver
+
+from ._common import table, write
+
+SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "paper-5kg.yaml"
+NAMED = "B-J1-L1-J1-L3-J1-L3-J1-L1-E1"
+SET_SIZE = 6
+REPEATS = 3
+
+
+def _solve(scenario, verdict, transcription):
+    settings = replace(scenario.optimizer, transcription=transcription)
+    problem = composition_problem(verdict.composition, scenario.catalog, scenario.task, settings, verdict)
+    start = time.perf_counter()
+    result = Candidate(problem, verdict.composition.name).solve()
+    return result, time.perf_counter() - start
+
+
+def _row(name, dof, transcription, runs):
+    results = [r for r, _ in runs]
+    r = results[0]
+    v = r.verification
+    return {"composition": name, "dof": dof, "transcription": transcription, "status": r.status,
+            "median_s": statistics.median(s for _, s in runs), "runs": len(runs), "iterations": r.iterations,
+            "substeps": r.substeps, "tf_s": r.tf if r.status == "optimal" else None,
+            "terminal_error_mm": v.terminal_error * 1e3 if v else None,
+            "min_clearance_m": v.min_clearance if v else None,
+            "reason": "" if r.status == "optimal" else r.reason[:70]}
+
+
+def _converge_chunk(context, chunk):
+    scenario, transcription = context
+    out = []
+    for verdict in chunk:
+        result, seconds = _solve(scenario, verdict, transcription)
+        out.append({"composition": verdict.composition.name, "dof": verdict.composition.dof, "status": result.status, "seconds": seconds,
+                    "iterations": result.iterations, "tf": result.tf, "reason": result.reason})
+    return out
+
+
+def _one_dof_robot() -> RobotModel:
+    model = pin.Model()
+    joint = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "joint_1")
+    model.appendBodyToJoint(joint, pin.Inertia(1.0, np.zeros(3), np.diag([1.0, 1.0, 1.0])), pin.SE3.Identity())
+    model.addFrame(pin.Frame("tool0", joint, 0, pin.SE3(np.eye(3), np.array([0.5, 0.0, 0.0])),
+                             pin.FrameType.OP_FRAME))
+    model.gravity.linear[:] = 0.0
+    model.lowerPositionLimit[:] = -10.0
+    model.upperPositionLimit[:] = 10.0
+    model.velocityLimit[:] = 100.0
+    model.effortLimit[:] = 1.0
+    return RobotModel(model, "tool0", name="1-dof bang-bang")
+
+
+def exact_vs_finite_difference() -> list[dict]:
+    rows = []
+    problem = ShootingProblem(_one_dof_robot(), [0.0], [1.0], settings=OptimizerSettings(nodes=9, substeps=4))
+    for jacobian in ("exact", "finite-difference"):
+        start = time.perf_counter()
+        outcome = ShootingSolver(problem, jacobian=jacobian).solve()
+        rows.append({"case": "1-DOF bang-bang, 8 intervals", "jacobian": jacobian, "status": outcome.status,
+                     "iterations": outcome.iterations, "seconds": time.perf_counter() - start,
+                     "tf_s": outcome.final.tf if outcome.final else None, "tf_exact_s": 2.0})
+    return rows
+
+
+def main() -> None:
+    scenario = load_scenario(SCENARIO)
+    survivors = sorted((v for v in filter_compositions(scenario) if v.passed), key=lambda v: v.time_bound)
+    chosen = [v for v in survivors if v.composition.name == NAMED]
+    chosen += [v for v in survivors if v.composition.name != NAMED][:SET_SIZE - 1]
+
+    rows = []
+    for verdict in chosen:
+        name, dof = verdict.composition.name, verdict.composition.dof
+        rows.append(_row(name, dof, "inverse", [_solve(scenario, verdict, "inverse") for _ in range(REPEATS)]))
+        rows.append(_row(name, dof, "forward", [_solve(scenario, verdict, "forward")]))
+    print(table(rows))
+
+    share = {}
+    for transcription, verdicts in (("inverse", survivors), ("forward", chosen)):
+        engine = ProcessEngine(available_cores())
+        start = time.perf_counter()
+        outcomes = list(engine.map_chunks(_converge_chunk, (scenario, transcription), verdicts, chunksize=1))
+        wall = time.perf_counter() - start
+        converged = [o for o in outcomes if o["status"] == "optimal"]
+        share[transcription] = {
+            "candidates": len(outcomes), "converged": len(converged),
+            "share": len(converged) / len(outcomes), "wall_seconds": wall,
+            "median_seconds": statistics.median(o["seconds"] for o in outcomes),
+            "median_seconds_5dof": statistics.median(
+                [o["seconds"] for o in outcomes if o["dof"] == 5] or [float("nan")]),
+            "median_iterations": statistics.median(o["iterations"] for o in outcomes),
+            "failures": [o for o in outcomes if o["status"] != "optimal"],
+        }
+        print(f"{transcription}: {len(converged)} of {len(outcomes)} converge and verify "
+              f"({wall:.1f} s wall on {engine.jobs} workers; median {share[transcription]['median_seconds']:.2f} s "
+              f"per candidate)")
+
+    fd_rows = exact_vs_finite_difference()
+    print(table(fd_rows))
+    path = write("ocp", rows, {"convergence": share, "jacobians": fd_rows,
+                               "note": "median_s is the whole Candidate.solve (solve, verify, refine) per run; "
+                                       "forward rows are one run each"})
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
