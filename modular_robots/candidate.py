@@ -34,7 +34,8 @@ class CandidateResult:
 
     ``status``: ``optimal`` (converged and verified), ``failed``, ``stopped`` (closed early) or
     ``pruned`` (set by the pruning manager). ``cost`` in its unit [s], ``tf`` [s],
-    ``cost_history`` the cost after every iteration, ``seconds`` spent in the solver and in
+    ``cost_history`` and ``violation_history`` the cost and scaled constraint violation after
+    every iteration, ``seconds`` spent in the solver and in
     verification, ``y`` the last scaled decision vector.
     """
 
@@ -48,6 +49,7 @@ class CandidateResult:
     tf: float
     constraint_violation: float
     cost_history: tuple[float, ...] = ()
+    violation_history: tuple[float, ...] = ()
     verification: Verification | None = None
     substeps: int = 0
     pruned_at_iteration: int | None = None
@@ -68,6 +70,7 @@ class CandidateResult:
             "substeps": self.substeps,
             "verification": self.verification.to_json() if self.verification else None,
             "cost_history": [_finite(c) for c in self.cost_history],
+            "violation_history": [_finite(c) for c in self.violation_history],
         }
 
     def pruned(self, iteration: int) -> CandidateResult:
@@ -102,6 +105,7 @@ class Candidate:
         self.jacobian = jacobian
         self.result: CandidateResult | None = None
         self.history: list[float] = []
+        self.violations: list[float] = []
         self.last: Iterate | None = None
         self._generator: Iterator[Iterate] | None = None
         self._seconds = 0.0
@@ -138,6 +142,7 @@ class Candidate:
                 for it in solver.iterate():
                     self.last = it
                     self.history.append(it.cost)
+                    self.violations.append(it.constraint_violation)
                     yield it
             finally:
                 solver.close()
@@ -164,8 +169,8 @@ class Candidate:
         self.result = CandidateResult(
             self.name, problem.nv, status, reason, last.iteration if last else 0, self._seconds,
             last.cost if last else np.nan, last.tf if last else np.nan,
-            last.constraint_violation if last else np.nan, tuple(self.history), verification,
-            problem.substeps, None, last.y if last else None)
+            last.constraint_violation if last else np.nan, tuple(self.history), tuple(self.violations),
+            verification, problem.substeps, None, last.y if last else None)
         self.problem = problem
 
 

@@ -26,6 +26,7 @@ decisions do not depend on the number of workers.
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 import signal
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -33,11 +34,14 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from .candidate import Candidate, CandidateResult
+from .exceptions import ModularRobotsError
 from .scenario import PruningSettings
 from .solver import Iterate
 
 __all__ = ["Progress", "Executor", "InProcessExecutor", "ProcessExecutor", "PruningManager", "ratio_rule", "reference_cost",
            "GUARD_VIOLATION"]
+
+logger = logging.getLogger(__name__)
 
 #: Largest scaled constraint violation of an iterate trusted as the pruning reference.
 GUARD_VIOLATION = 1e-3
@@ -131,7 +135,9 @@ class InProcessExecutor:
     def _build(self, names) -> None:
         for name in names:
             if name not in self._candidates:
-                self._candidates[name] = candidate = self._factory(self._context, self._pending.pop(name))
+                candidate = self._factory(self._context, self._pending[name])
+                del self._pending[name]
+                self._candidates[name] = candidate
                 self._iterators[name] = candidate.iterate()
 
     def advance(self, names):
@@ -139,13 +145,19 @@ class InProcessExecutor:
         return _advance(self._candidates, self._iterators, names)
 
     def stop(self, names):
-        self._build(names)
-        return _stop(self._candidates, names)
+        out = {name: _never_started(name) for name in names if name not in self._candidates}
+        out.update(_stop(self._candidates, [n for n in names if n in self._candidates]))
+        return out
 
     def shutdown(self) -> None:
         for candidate in self._candidates.values():
             if candidate.result is None:
                 candidate.close()
+
+
+def _never_started(name: str) -> CandidateResult:
+    nan = float("nan")
+    return CandidateResult(name, 0, "stopped", "stopped before it started", 0, 0.0, nan, nan, nan)
 
 
 def _worker(conn, factory, context, specs, names) -> None:
@@ -179,6 +191,7 @@ class ProcessExecutor:
         ctx = multiprocessing.get_context()
         self._owner = {name: i % jobs for i, name in enumerate(self._names)}
         self._conns, self._procs = [], []
+        self._awaiting: set[int] = set()
         for w in range(jobs):
             mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
             parent, child = ctx.Pipe()
@@ -192,22 +205,40 @@ class ProcessExecutor:
     def names(self) -> list[str]:
         return list(self._names)
 
-    def _command(self, command: str, names) -> dict:
+    def _command(self, command: str, names, tolerate_dead: bool = False) -> dict:
         by_worker: dict[int, list[str]] = {}
         for name in names:
             by_worker.setdefault(self._owner[name], []).append(name)
-        for w, mine in by_worker.items():
-            self._conns[w].send((command, mine))
         out = {}
+        for w, mine in by_worker.items():
+            try:
+                if w in self._awaiting:  # a reply left unread by an interruption
+                    self._conns[w].recv()
+                    self._awaiting.discard(w)
+                self._conns[w].send((command, mine))
+                self._awaiting.add(w)
+            except (EOFError, OSError) as exc:
+                if not tolerate_dead:
+                    raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
+                out.update({name: _never_started(name) for name in mine})
         for w in by_worker:
-            out.update(self._conns[w].recv())
+            if w not in self._awaiting:
+                continue
+            try:
+                out.update(self._conns[w].recv())
+                self._awaiting.discard(w)
+            except (EOFError, OSError) as exc:
+                self._awaiting.discard(w)
+                if not tolerate_dead:
+                    raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
+                out.update({name: _never_started(name) for name in by_worker[w]})
         return out
 
     def advance(self, names):
         return self._command("advance", names)
 
     def stop(self, names):
-        return self._command("stop", names)
+        return self._command("stop", names, tolerate_dead=True)
 
     def shutdown(self) -> None:
         for conn in self._conns:
@@ -265,10 +296,14 @@ class PruningManager:
                                       converged, self.guard_violation)
                 yield Progress(round_, len(alive), best, tuple(sorted(pruned)), tuple(finished))
         finally:
-            if alive:
-                for name, result in self.executor.stop(alive).items():
-                    self.results.setdefault(name, result)
-            self.executor.shutdown()
+            try:
+                if alive:
+                    for name, result in self.executor.stop(alive).items():
+                        self.results.setdefault(name, result)
+            except Exception:  # noqa: BLE001 - a dead worker must not hide the original error
+                logger.debug("stopping the live candidates failed", exc_info=True)
+            finally:
+                self.executor.shutdown()
         self.results = {name: self.results[name] for name in order}
 
     def run(self) -> list[CandidateResult]:

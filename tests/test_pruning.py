@@ -1,0 +1,813 @@
+"""Step D (lockstep pruning) and the whole pipeline (issue 5 item 6).
+
+The rule and the manager are checked on scripted fake candidates, whose costs and constraint
+violations are fixed lists, so every pruning decision is known in advance. The pipeline is
+checked on ``tests/data/small.yaml`` (516 compositions, 6 feasible): each real run is made once
+per module, in a module-scoped fixture, and shared by several tests.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import multiprocessing
+import re
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from click.testing import CliRunner
+
+from modular_robots.candidate import CandidateResult
+from modular_robots.cli import main
+from modular_robots.pipeline import RunResult, run_scenario
+from modular_robots.pruning import (GUARD_VIOLATION, InProcessExecutor, ProcessExecutor, Progress,
+                                    PruningManager, ratio_rule, reference_cost)
+from modular_robots.scenario import PruningSettings, load_scenario
+from modular_robots.solver import Iterate
+
+from .conftest import PAPER_SCENARIO, ROOT
+
+SMALL = ROOT / "tests" / "data" / "small.yaml"
+SMALL_WINNER = "B-J1-L1-J1-L1-J1-L1-E2"
+SPEC_CANDIDATE_FIELDS = {"composition", "dof", "status", "iterations", "cost", "tf", "constraint_violation",
+                         "pruned_at_iteration", "cost_history"}
+
+
+# --------------------------------------------------------------------------------------------
+# Scripted fake candidates (same interface as modular_robots.candidate.Candidate for executors)
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Script:
+    """A fake candidate: one iterate per entry of ``costs`` (violation from ``violations``, 0 by
+    default); when the script runs out it ends with status ``end`` and cost ``final_cost``
+    (default: the last iterate's cost)."""
+
+    name: str
+    costs: tuple[float, ...]
+    violations: tuple[float, ...] | None = None
+    end: str = "optimal"
+    final_cost: float | None = None
+
+    def violation(self, i: int) -> float:
+        return 0.0 if self.violations is None else self.violations[i]
+
+
+class FakeCandidate:
+    """Yields the scripted iterates; ``log`` (a list, in-process only) records every step."""
+
+    def __init__(self, script: Script, log: list | None = None):
+        self.name = script.name
+        self.script = script
+        self.log = log
+        self.result: CandidateResult | None = None
+        self.last: Iterate | None = None
+        self.history: list[float] = []
+        self._generator = None
+
+    def iterate(self):
+        if self._generator is None:
+            self._generator = self._run()
+        return self._generator
+
+    def _run(self):
+        for i, cost in enumerate(self.script.costs):
+            if self.log is not None:
+                self.log.append(("step", self.name, i + 1))
+            self.last = Iterate(i + 1, float(cost), self.script.violation(i), float(cost),
+                                np.array([cost, self.script.violation(i)]))
+            self.history.append(float(cost))
+            yield self.last
+        if self.log is not None:
+            self.log.append(("end", self.name, len(self.script.costs)))
+        self._finish(self.script.end, self.script.final_cost)
+
+    def close(self):
+        if self.log is not None:
+            self.log.append(("close", self.name, self.last.iteration if self.last else 0))
+        if self._generator is not None:
+            self._generator.close()
+        if self.result is None:
+            self._finish("stopped", None)
+
+    def _finish(self, status: str, cost: float | None):
+        last = self.last
+        if cost is None:
+            cost = last.cost if last else float("nan")
+        self.result = CandidateResult(
+            self.name, 3, status, f"scripted {status}", last.iteration if last else 0, 0.0, cost, cost,
+            last.constraint_violation if last else float("nan"), tuple(self.history),
+            verification=None, substeps=4, pruned_at_iteration=None, y=last.y if last else None)
+
+
+def fake_factory(context, spec: Script) -> FakeCandidate:
+    """Module-level (picklable) factory; ``context`` is an event log or None."""
+    return FakeCandidate(spec, context)
+
+
+class RecordingExecutor:
+    """Wraps an executor and logs its ``advance`` and ``stop`` calls into ``log``."""
+
+    def __init__(self, inner, log: list):
+        self.inner, self.log = inner, log
+
+    def names(self):
+        return self.inner.names()
+
+    def advance(self, names):
+        self.log.append(("advance", tuple(names)))
+        return self.inner.advance(names)
+
+    def stop(self, names):
+        self.log.append(("stop", tuple(names)))
+        return self.inner.stop(names)
+
+    def shutdown(self):
+        self.log.append(("shutdown",))
+        self.inner.shutdown()
+
+
+def make_executor(scripts, jobs=1, log=None):
+    names = [s.name for s in scripts]
+    if jobs == 1:
+        return InProcessExecutor(fake_factory, log, list(scripts), names)
+    return ProcessExecutor(fake_factory, None, list(scripts), names, jobs)
+
+
+def run_fakes(scripts, rule="ratio", threshold=0.5, start_iteration=2, jobs=1, log=None):
+    """Run ``scripts`` under the manager; return (results by name, list of Progress)."""
+    manager = PruningManager(make_executor(scripts, jobs, log), PruningSettings(rule, threshold, start_iteration))
+    progress = list(manager.rounds())
+    assert list(manager.results) == [s.name for s in scripts]  # the executor's order
+    return manager.results, progress
+
+
+def summary(results) -> list[tuple]:
+    return [(r.name, r.status, r.pruned_at_iteration, r.iterations, r.cost, r.cost_history)
+            for r in results.values()]
+
+
+def expected_outcome(scripts, rule, threshold, start_iteration, guard=GUARD_VIOLATION) -> dict:
+    """An independent re-statement of SPEC §6 with the documented guard: name -> (status,
+    iterations, pruned_at_iteration)."""
+    by_name = {s.name: s for s in scripts}
+    alive = [s.name for s in scripts]
+    out, converged = {}, {}
+    round_ = 0
+    while alive:
+        round_ += 1
+        for name in alive:
+            s = by_name[name]
+            if round_ > len(s.costs):  # this round's next() ends the generator
+                out[name] = (s.end, len(s.costs), None)
+                if s.end == "optimal":
+                    converged[name] = s.final_cost if s.final_cost is not None else s.costs[-1]
+        alive = [n for n in alive if n not in out]
+        if rule == "ratio" and round_ >= start_iteration:
+            now = {n: (by_name[n].costs[round_ - 1], by_name[n].violation(round_ - 1)) for n in alive}
+            trusted = [c for c, v in now.values() if v <= guard] + list(converged.values())
+            if trusted and min(trusted) > 0:
+                ref = min(trusted)
+                for n, (c, v) in now.items():
+                    if v <= guard and c - ref > threshold * ref:
+                        out[n] = ("pruned", round_, round_)
+            alive = [n for n in alive if n not in out]
+    return out
+
+
+def random_scripts(rng: np.random.Generator, count: int) -> list[Script]:
+    scripts = []
+    for k in range(count):
+        length = int(rng.integers(1, 12))
+        costs = tuple(float(c) for c in np.round(rng.uniform(0.5, 3.0, length), 2))
+        violations = tuple(float(v) for v in rng.choice([0.0, GUARD_VIOLATION, 1e-2, 1.0], length,
+                                                         p=[0.5, 0.1, 0.2, 0.2]))
+        end = str(rng.choice(["optimal", "optimal", "failed"]))
+        final = None if rng.random() < 0.5 else float(np.round(rng.uniform(0.5, 3.0), 2))
+        scripts.append(Script(f"c{k}", costs, violations, end, final))
+    return scripts
+
+
+# --------------------------------------------------------------------------------------------
+# 1. The rule's arithmetic
+# --------------------------------------------------------------------------------------------
+
+def test_reference_cost_is_the_smallest_trusted_cost():
+    costs = {"a": 1.0, "b": 2.0, "c": 3.0}
+    assert reference_cost(costs, {"a": 0.0, "b": 0.0, "c": 0.0}, {}) == 1.0
+    # an untrusted iterate is never the reference, however cheap
+    assert reference_cost(costs, {"a": 0.5, "b": 0.0, "c": 0.0}, {}) == 2.0
+    # the guard is inclusive: a violation equal to GUARD_VIOLATION is trusted
+    assert reference_cost(costs, {"a": GUARD_VIOLATION, "b": 1.0, "c": 1.0}, {}) == 1.0
+    assert reference_cost(costs, {"a": np.nextafter(GUARD_VIOLATION, 1.0), "b": 1.0, "c": 1.0}, {}) is None
+    # converged costs count, even when no live candidate is trusted
+    assert reference_cost(costs, {"a": 1.0, "b": 1.0, "c": 1.0}, {"z": 2.5}) == 2.5
+    assert reference_cost(costs, {"a": 0.0, "b": 1.0, "c": 1.0}, {"z": 0.5}) == 0.5
+    assert reference_cost({}, {}, {}) is None
+
+
+@pytest.mark.parametrize("cost_b, pruned", [(3.0, False), (np.nextafter(3.0, 4.0), True), (2.9, False), (4.0, True)])
+def test_ratio_rule_prunes_strictly_above_the_threshold(cost_b, pruned):
+    # (3 - 2) / 2 == 0.5 exactly: not pruned; one ulp more: pruned
+    chosen = ratio_rule({"a": 2.0, "b": cost_b}, {"a": 0.0, "b": 0.0}, {}, iteration=2)
+    assert chosen == ({"b"} if pruned else set())
+
+
+def test_ratio_rule_threshold_and_start_iteration():
+    costs, violations = {"a": 1.0, "b": 1.3, "c": 10.0}, {"a": 0.0, "b": 0.0, "c": 0.0}
+    assert ratio_rule(costs, violations, {}, iteration=1) == set()  # before start_iteration (2)
+    assert ratio_rule(costs, violations, {}, iteration=2) == {"c"}
+    assert ratio_rule(costs, violations, {}, iteration=2, threshold=0.2) == {"b", "c"}
+    assert ratio_rule(costs, violations, {}, iteration=4, threshold=0.2, start_iteration=5) == set()
+    assert ratio_rule(costs, violations, {}, iteration=5, threshold=0.2, start_iteration=5) == {"b", "c"}
+    assert ratio_rule(costs, violations, {}, iteration=1, start_iteration=0) == {"c"}
+
+
+def test_ratio_rule_guard():
+    # the cheap iterate is infeasible: the reference is b's 2.0, so c (3.0) stays
+    assert ratio_rule({"a": 1.0, "b": 2.0, "c": 3.0}, {"a": 0.1, "b": 0.0, "c": 0.0}, {}, 2) == set()
+    # c is far too expensive but its own iterate is not trusted: not pruned
+    assert ratio_rule({"a": 1.0, "c": 100.0}, {"a": 0.0, "c": 2 * GUARD_VIOLATION}, {}, 2) == set()
+    assert ratio_rule({"a": 1.0, "c": 100.0}, {"a": 0.0, "c": GUARD_VIOLATION}, {}, 2) == {"c"}
+    # nothing trusted: nobody is pruned
+    assert ratio_rule({"a": 1.0, "c": 100.0}, {"a": 1.0, "c": 1.0}, {}, 2) == set()
+    # a converged cost is a reference on its own
+    assert ratio_rule({"c": 1.6}, {"c": 0.0}, {"z": 1.0}, 2) == {"c"}
+    assert ratio_rule({"c": 1.5}, {"c": 0.0}, {"z": 1.0}, 2) == set()
+    # a custom guard
+    assert ratio_rule({"a": 1.0, "c": 2.0}, {"a": 0.05, "c": 0.0}, {}, 2, guard_violation=0.1) == {"c"}
+
+
+def test_ratio_rule_without_a_positive_reference_prunes_nobody():
+    assert ratio_rule({"a": 0.0, "b": 5.0}, {"a": 0.0, "b": 0.0}, {}, 3) == set()
+
+
+# --------------------------------------------------------------------------------------------
+# 1. The rule inside the manager, on scripted candidates
+# --------------------------------------------------------------------------------------------
+
+def test_pruned_at_the_first_round_above_the_threshold():
+    scripts = [
+        Script("a", (1.0,) * 6),
+        # round 1 is before start_iteration; rounds 2-3 exactly at the threshold; round 4 above
+        Script("b", (9.0, 1.5, 1.5, 1.75, 1.0, 1.0)),
+    ]
+    results, progress = run_fakes(scripts)
+    a, b = results["a"], results["b"]
+    assert (a.status, a.iterations, a.pruned_at_iteration) == ("optimal", 6, None)
+    assert (b.status, b.pruned_at_iteration, b.iterations) == ("pruned", 4, 4)
+    assert b.cost == 1.75 and b.cost_history == (9.0, 1.5, 1.5, 1.75)
+    assert "pruned" in b.reason
+    assert [p.pruned for p in progress] == [(), (), (), ("b",), (), (), ()]
+    assert [p.alive for p in progress] == [2, 2, 2, 1, 1, 1, 0]
+    assert [p.finished for p in progress][-1] == ("a",)
+    assert progress[3] == Progress(4, 1, 1.0, ("b",), ())
+
+
+@pytest.mark.parametrize("start_iteration", [1, 2, 3, 5])
+def test_never_pruned_before_start_iteration(start_iteration):
+    scripts = [Script("a", (1.0,) * 6), Script("b", (10.0,) * 6)]
+    results, _ = run_fakes(scripts, start_iteration=start_iteration)
+    assert results["b"].status == "pruned"
+    assert results["b"].pruned_at_iteration == start_iteration == results["b"].iterations
+    assert results["b"].cost_history == (10.0,) * start_iteration
+
+
+def test_threshold_setting_is_used():
+    scripts = [Script("a", (1.0,) * 4), Script("b", (1.3,) * 4), Script("c", (1.1,) * 4)]
+    results, _ = run_fakes(scripts, threshold=0.2)
+    assert [r.status for r in results.values()] == ["optimal", "pruned", "optimal"]
+    results, _ = run_fakes(scripts, threshold=0.5)
+    assert [r.status for r in results.values()] == ["optimal"] * 3
+
+
+def test_rule_none_prunes_nobody():
+    scripts = [Script("a", (1.0,) * 5), Script("b", (100.0,) * 3), Script("c", (50.0,) * 7, end="failed")]
+    results, progress = run_fakes(scripts, rule="none")
+    assert summary(results) == [
+        ("a", "optimal", None, 5, 1.0, (1.0,) * 5),
+        ("b", "optimal", None, 3, 100.0, (100.0,) * 3),
+        ("c", "failed", None, 7, 50.0, (50.0,) * 7),
+    ]
+    assert all(p.pruned == () for p in progress)
+    assert len(progress) == 8
+
+
+def test_guard_reference_and_own_iterate_must_be_trusted():
+    scripts = [
+        # cheapest, but trusted only from round 4 on
+        Script("a", (1.0,) * 8, (0.5, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0)),
+        # twice a's cost; its own iterate is untrusted in round 4 -> pruned in round 5
+        Script("b", (2.0,) * 8, (0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0)),
+        # three times a's cost but never trusted -> never pruned
+        Script("c", (3.0,) * 8, (1.0,) * 8),
+        # trusted at exactly the guard -> pruned as soon as a is trusted
+        Script("d", (1.6,) * 8, (GUARD_VIOLATION,) * 8),
+    ]
+    results, progress = run_fakes(scripts)
+    assert results["a"].status == "optimal"
+    assert (results["b"].status, results["b"].pruned_at_iteration) == ("pruned", 5)
+    assert results["c"].status == "optimal" and results["c"].iterations == 8
+    assert (results["d"].status, results["d"].pruned_at_iteration) == ("pruned", 4)
+    # the best trusted cost: d's 1.6 while a is untrusted, then a's 1.0
+    assert [p.best_cost for p in progress[:5]] == [1.6, 1.6, 1.6, 1.0, 1.0]
+
+
+def test_no_trusted_iterate_means_no_pruning():
+    scripts = [Script("a", (1.0,) * 5, (0.1,) * 5), Script("b", (10.0,) * 5, (0.2,) * 5),
+               Script("c", (20.0,) * 5, (1.0,) * 5, end="failed")]
+    results, progress = run_fakes(scripts)
+    assert [r.status for r in results.values()] == ["optimal", "optimal", "failed"]
+    assert [p.best_cost for p in progress[:5]] == [None] * 5
+
+
+def test_a_converged_cost_stays_the_reference_after_it_finished():
+    scripts = [
+        # converges in round 3 with a verified cost of 1.0 (its last iterate said 1.1)
+        Script("a", (1.2, 1.1), end="optimal", final_cost=1.0),
+        # 1.4 is within 50 % of 1.0; 1.55 is not (but is within 50 % of a's last iterate, 1.1)
+        Script("b", (1.4, 1.4, 1.4, 1.4, 1.55, 1.55, 1.55)),
+        Script("c", (5.0, 5.0), (1.0, 1.0)),  # untrusted until it converges in round 3
+    ]
+    results, progress = run_fakes(scripts)
+    assert (results["a"].status, results["a"].cost, results["a"].iterations) == ("optimal", 1.0, 2)
+    assert (results["b"].status, results["b"].pruned_at_iteration) == ("pruned", 5)
+    assert results["c"].status == "optimal"
+    assert progress[2].finished == ("a", "c") and progress[2].best_cost == 1.0
+    assert all(p.best_cost == 1.0 for p in progress[2:])
+
+
+def test_a_failed_candidate_is_no_reference():
+    scripts = [Script("a", (1.2, 1.1), end="failed", final_cost=1.0),
+               Script("b", (1.4, 1.4, 1.4, 1.4, 1.55, 1.55, 1.55))]
+    results, progress = run_fakes(scripts)
+    assert [r.status for r in results.values()] == ["failed", "optimal"]
+    assert [p.best_cost for p in progress] == [1.2, 1.1, 1.4, 1.4, 1.55, 1.55, 1.55, 1.55]
+
+
+def test_a_converged_candidate_is_never_pruned():
+    # b's generator ends (converged, cost 3.0) in round 3, when a's cost is 1.0: b stays optimal,
+    # and its cost does not prune anything either
+    scripts = [Script("a", (1.0,) * 4), Script("b", (1.0, 1.0), final_cost=3.0)]
+    results, _ = run_fakes(scripts)
+    assert [(r.status, r.cost) for r in results.values()] == [("optimal", 1.0), ("optimal", 3.0)]
+
+
+def test_candidate_without_iterates():
+    scripts = [Script("a", (), final_cost=2.0), Script("b", (), end="failed"), Script("c", (1.0, 2.0, 3.0))]
+    results, progress = run_fakes(scripts)
+    assert summary(results)[:2] == [("a", "optimal", None, 0, 2.0, ()),
+                                    ("b", "failed", None, 0, pytest.approx(np.nan, nan_ok=True), ())]
+    assert results["c"].status == "optimal" and progress[0].finished == ("a", "b")
+
+
+def test_random_scripts_match_the_rule_statement():
+    rng = np.random.default_rng(20240506)
+    for trial in range(60):
+        scripts = random_scripts(rng, int(rng.integers(1, 7)))
+        threshold = float(rng.choice([0.2, 0.5, 1.0]))
+        start = int(rng.integers(1, 4))
+        rule = "ratio" if trial % 5 else "none"
+        results, progress = run_fakes(scripts, rule, threshold, start)
+        expected = expected_outcome(scripts, rule, threshold, start)
+        got = {r.name: (r.status, r.iterations, r.pruned_at_iteration) for r in results.values()}
+        assert got == expected, (trial, scripts, threshold, start)
+        for r in results.values():
+            assert r.cost_history == by_name(scripts)[r.name].costs[:r.iterations]
+        assert sum(len(p.pruned) for p in progress) == sum(r.status == "pruned" for r in results.values())
+
+
+def by_name(scripts):
+    return {s.name: s for s in scripts}
+
+
+# --------------------------------------------------------------------------------------------
+# 2. Lockstep order
+# --------------------------------------------------------------------------------------------
+
+def split_rounds(log):
+    """The event log cut at every ``advance`` call: one list of events per round."""
+    rounds = []
+    for event in log:
+        if event[0] == "advance":
+            rounds.append([event])
+        elif rounds:
+            rounds[-1].append(event)
+    return rounds
+
+
+@pytest.mark.parametrize("rule", ["ratio", "none"])
+def test_lockstep_every_live_candidate_advances_once_per_round(rule):
+    scripts = [
+        Script("a", (1.0,) * 7),
+        Script("b", (1.2,) * 2),                       # finishes in round 3
+        Script("c", (1.1,) * 5, end="failed"),          # fails in round 6
+        Script("d", (3.0,) * 9),                       # pruned in round 2 under ratio
+        Script("e", (1.4, 1.4, 1.4, 1.6, 1.6, 1.6)),  # pruned in round 4 under ratio
+    ]
+    log = []
+    manager = PruningManager(RecordingExecutor(make_executor(scripts, 1, log), log), PruningSettings(rule))
+    for progress in manager.rounds():
+        log.append(("progress", progress))
+    rounds = split_rounds(log)
+    alive = [s.name for s in scripts]
+    ends = {"b": 3, "c": 6, "a": 8}
+    prunes = {"d": 2, "e": 4} if rule == "ratio" else {}
+    if rule == "none":
+        ends.update(d=10, e=7)
+    assert len(rounds) == max(ends.values())
+    for number, events in enumerate(rounds, start=1):
+        advance, progress = events[0], [e for e in events if e[0] == "progress"][-1]
+        assert advance == ("advance", tuple(alive)), number
+        assert progress[0] == "progress" and progress[1].round == number
+        moves = [e for e in events if e[0] in ("step", "end")]
+        # each live candidate exactly once, and all of them before any pruning decision
+        assert sorted(e[1] for e in moves) == sorted(alive)
+        first_stop = next((i for i, e in enumerate(events) if e[0] in ("stop", "close")), len(events))
+        assert all(events.index(m) < first_stop for m in moves)
+        assert all(e[2] == number for e in moves if e[0] == "step")
+        finished = tuple(n for n in alive if ends.get(n) == number)
+        pruned = tuple(sorted(n for n in alive if prunes.get(n) == number))
+        assert progress[1].finished == finished and progress[1].pruned == pruned
+        if pruned:
+            assert ("stop", pruned) in events
+            assert sorted(e[1] for e in events if e[0] == "close") == sorted(pruned)
+        alive = [n for n in alive if n not in finished and n not in pruned]
+        assert progress[1].alive == len(alive)
+    assert alive == []
+    assert log[-1] == ("shutdown",)
+    results = manager.results
+    for name, end in ends.items():
+        assert results[name].iterations == end - 1 and results[name].status == by_name(scripts)[name].end
+    for name, at in prunes.items():
+        assert (results[name].status, results[name].pruned_at_iteration, results[name].iterations) == ("pruned", at, at)
+
+
+def test_closing_the_rounds_early_stops_the_live_candidates():
+    scripts = [Script("a", (1.0,) * 6), Script("b", (1.1,) * 2), Script("c", (1.2,) * 6)]
+    log = []
+    manager = PruningManager(RecordingExecutor(make_executor(scripts, 1, log), log), PruningSettings())
+    rounds = manager.rounds()
+    for progress in rounds:
+        if progress.round == 4:
+            break
+    rounds.close()
+    assert ("stop", ("a", "c")) in log and log[-1] == ("shutdown",)
+    assert {n: (r.status, r.iterations) for n, r in manager.results.items()} == {
+        "a": ("stopped", 4), "b": ("optimal", 2), "c": ("stopped", 4)}
+
+
+# --------------------------------------------------------------------------------------------
+# 3. Worker-count independence on scripted candidates
+# --------------------------------------------------------------------------------------------
+
+SCRIPT_SETS = [
+    [Script("a", (1.0,) * 6), Script("b", (9.0, 1.5, 1.5, 1.75, 1.0, 1.0))],
+    [Script("a", (1.0,) * 8, (0.5, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0)),
+     Script("b", (2.0,) * 8, (0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0)),
+     Script("c", (3.0,) * 8, (1.0,) * 8), Script("d", (1.6,) * 8, (GUARD_VIOLATION,) * 8)],
+    [Script("a", (1.2, 1.1), final_cost=1.0), Script("b", (1.4, 1.4, 1.4, 1.4, 1.55, 1.55, 1.55)),
+     Script("c", (5.0, 5.0), (1.0, 1.0)), Script("x", (), end="failed"), Script("y", (2.0,) * 3, end="failed")],
+    random_scripts(np.random.default_rng(7), 7),
+    random_scripts(np.random.default_rng(8), 5),
+]
+
+
+def _progress_tuples(progress):
+    return [(p.round, p.alive, p.best_cost, p.pruned, tuple(sorted(p.finished))) for p in progress]
+
+
+@pytest.mark.parametrize("rule", ["ratio", "none"])
+def test_same_decisions_in_process_and_with_workers(rule):
+    for scripts in SCRIPT_SETS:
+        reference, reference_progress = run_fakes(scripts, rule, jobs=1)
+        for jobs in (2, 3):
+            results, progress = run_fakes(scripts, rule, jobs=jobs)
+            assert summary(results) == summary(reference) or _nan_equal(summary(results), summary(reference))
+            assert _progress_tuples(progress) == _progress_tuples(reference_progress)
+    deadline = time.monotonic() + 5
+    while multiprocessing.active_children() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert multiprocessing.active_children() == []
+
+
+def _nan_equal(a, b):
+    return repr(a) == repr(b)
+
+
+def test_workers_advance_in_lockstep():
+    scripts = SCRIPT_SETS[1] + [Script("e", (1.0,) * 3)]
+    log = []
+    manager = PruningManager(RecordingExecutor(make_executor(scripts, 2), log), PruningSettings())
+    alive = {s.name for s in scripts}
+    for progress in manager.rounds():
+        advances = [e for e in log if e[0] == "advance"]
+        assert len(advances) == progress.round and set(advances[-1][1]) == alive
+        alive -= set(progress.pruned) | set(progress.finished)
+    assert {n: r.iterations for n, r in manager.results.items()} == {
+        "a": 8, "b": 2, "c": 8, "d": 2, "e": 3}
+
+
+# --------------------------------------------------------------------------------------------
+# Failure paths: interruption mid-command, a failing factory, a dead worker
+# --------------------------------------------------------------------------------------------
+
+class _InterruptingConnection:
+    """Stands for a worker pipe; the first ``recv`` after ``arm()`` raises KeyboardInterrupt
+    before reading the reply, as a Ctrl-C while the parent waits for a worker does."""
+
+    def __init__(self, conn):
+        self.conn, self.armed = conn, False
+
+    def send(self, obj):
+        self.conn.send(obj)
+
+    def recv(self):
+        if self.armed:
+            self.armed = False
+            raise KeyboardInterrupt
+        return self.conn.recv()
+
+    def close(self):
+        self.conn.close()
+
+
+def test_ctrl_c_while_waiting_for_a_worker_leaves_candidate_results():
+    scripts = [Script(n, (1.0,) * 20) for n in "abcd"]
+    executor = make_executor(scripts, 2)
+    executor._conns = [_InterruptingConnection(c) for c in executor._conns]
+    manager = PruningManager(executor, PruningSettings())
+    with pytest.raises(KeyboardInterrupt):
+        for progress in manager.rounds():
+            if progress.round == 2:
+                executor._conns[0].armed = True
+    assert set(manager.results) == set("abcd")
+    assert all(isinstance(r, CandidateResult) and r.status == "stopped" for r in manager.results.values())
+
+
+def broken_factory(context, spec: Script):
+    if spec.name == "bad":
+        raise RuntimeError("cannot build bad")
+    return FakeCandidate(spec)
+
+
+def test_factory_error_propagates_in_process():
+    scripts = [Script("a", (1.0,) * 3), Script("bad", (1.0,) * 3)]
+    manager = PruningManager(InProcessExecutor(broken_factory, None, scripts, ["a", "bad"]), PruningSettings())
+    try:
+        manager.run()
+    except Exception as exc:  # noqa: BLE001 - which exception is the point
+        assert isinstance(exc, RuntimeError), f"{type(exc).__name__}: {exc}"
+
+
+def test_a_dead_worker_does_not_leave_the_others_running():
+    scripts = [Script("a", (1.0,) * 3), Script("bad", (1.0,) * 3), Script("c", (1.0,) * 3)]
+    names = [s.name for s in scripts]
+    executor = ProcessExecutor(broken_factory, None, scripts, names, 2)
+    try:
+        with pytest.raises(Exception):
+            PruningManager(executor, PruningSettings()).run()
+        for proc in executor._procs:
+            proc.join(timeout=1)
+        assert not any(proc.is_alive() for proc in executor._procs)
+    finally:
+        for proc in executor._procs:  # only the processes this test started
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(timeout=5)
+
+
+# --------------------------------------------------------------------------------------------
+# 3-5. The real small scenario
+# --------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def small_scenario():
+    return load_scenario(SMALL)
+
+
+@pytest.fixture(scope="module")
+def small_run_1(small_scenario, tmp_path_factory) -> tuple[RunResult, object]:
+    out = tmp_path_factory.mktemp("small-jobs1")
+    return run_scenario(small_scenario, out, jobs=1), out
+
+
+@pytest.fixture(scope="module")
+def small_run_2(small_scenario, tmp_path_factory) -> tuple[RunResult, object]:
+    out = tmp_path_factory.mktemp("small-jobs2")
+    result = run_scenario(small_scenario, out, jobs=2)
+    return result, out
+
+
+@pytest.fixture(scope="module")
+def small_cli_none(tmp_path_factory):
+    """``modular-robots run small.yaml --rule none`` through click: (CliRunner result, result.json)."""
+    out = tmp_path_factory.mktemp("small-none")
+    result = CliRunner().invoke(main, ["run", str(SMALL), "--rule", "none", "--jobs", "2", "--out", str(out)])
+    document = json.loads((out / "result.json").read_text()) if (out / "result.json").exists() else None
+    return result, document, out
+
+
+def _per_candidate(run: RunResult):
+    return [(c.name, c.status, c.iterations, c.pruned_at_iteration, len(c.cost_history)) for c in run.candidates]
+
+
+def test_small_same_outcome_with_one_and_two_workers(small_run_1, small_run_2):
+    one, two = small_run_1[0], small_run_2[0]
+    assert one.winner.name == two.winner.name == SMALL_WINNER
+    assert _per_candidate(one) == _per_candidate(two)
+    assert one.rounds == two.rounds and one.iterations == two.iterations
+    for a, b in zip(one.candidates, two.candidates):
+        assert a.cost == pytest.approx(b.cost, rel=1e-9, abs=1e-12)
+        assert np.allclose(a.cost_history, b.cost_history, rtol=1e-9)
+    assert one.winner.tf == pytest.approx(1.575, abs=2e-3)
+    assert multiprocessing.active_children() == []
+
+
+def test_small_result_json(small_run_1):
+    run, out = small_run_1
+    doc = json.loads((out / "result.json").read_text())
+    assert doc["status"] == "done" and doc["partial"] is False
+    assert doc["scenario"] == "small"
+    assert doc["settings"]["pruning"] == {"rule": "ratio", "threshold": 0.5, "start_iteration": 2}
+    counts = doc["counts"]
+    assert counts["enumerated"] == 516 and counts["feasible"] == 6 and counts["optimized"] == 6
+    assert sum(counts["removed"].values()) == 516 - 6
+    assert counts["remaining_after"]["collision"] == 6
+    assert counts["pruned"] + counts["failed"] + counts["optimal"] == 6
+    assert counts["pruned"] == sum(c.status == "pruned" for c in run.candidates)
+    assert {"feasibility", "optimization", "report"} <= set(doc["seconds"])
+
+    candidates = doc["candidates"]
+    assert len(candidates) == 6 and len({c["composition"] for c in candidates}) == 6
+    for c in candidates:
+        assert SPEC_CANDIDATE_FIELDS <= set(c), c["composition"]
+        assert c["status"] in ("optimal", "pruned", "failed")
+        assert 2 <= c["dof"] <= 4
+        assert len(c["cost_history"]) == c["iterations"] > 0
+        assert c["cost"] == c["cost_history"][-1] or c["status"] == "optimal"
+        if c["status"] == "pruned":
+            assert c["pruned_at_iteration"] == c["iterations"] >= 2
+        else:
+            assert c["pruned_at_iteration"] is None
+    assert doc["totals"]["optimizer_iterations"] == sum(c["iterations"] for c in candidates) == run.iterations
+
+    winner = doc["winner"]
+    optimal = [c for c in candidates if c["status"] == "optimal"]
+    assert winner["composition"] == min(optimal, key=lambda c: c["cost"])["composition"] == SMALL_WINNER
+    assert winner["tf"] == pytest.approx(1.575, abs=2e-3) and winner["cost"] == winner["tf"]
+    verification = winner["verification"]
+    assert verification["passed"] is True
+    assert verification["terminal_error"] <= 0.01 and verification["min_clearance"] >= 0.0
+    assert set(winner["files"].values()) == {"winner.urdf", "trajectory.csv", "joints.png", "pruning.png"}
+    for name in winner["files"].values():
+        assert (out / name).is_file()
+    assert not list(out.glob(".*"))  # no temporary files left behind
+
+
+def test_small_winner_urdf_loads_in_pinocchio_and_yourdfpy(small_run_1):
+    yourdfpy = pytest.importorskip("yourdfpy")
+    _, out = small_run_1
+    path = out / "winner.urdf"
+    model = pin.buildModelFromUrdf(str(path))
+    assert model.nq == model.nv == 4
+    assert model.existFrame("base_link") and model.existFrame("tool0")
+    urdf = yourdfpy.URDF.load(str(path))
+    if hasattr(urdf, "validate"):
+        assert urdf.validate()
+    assert urdf.base_link == "base_link" and "tool0" in urdf.link_map
+    assert len(urdf.actuated_joint_names) == 4
+    # the payload (1 kg) is in the model
+    mass = sum(link.inertial.mass for link in urdf.robot.links if link.inertial is not None)
+    assert sum(i.mass for i in model.inertias) == pytest.approx(mass)
+    assert any(link.inertial is not None and link.inertial.mass == pytest.approx(1.0)
+               for link in urdf.robot.links if link.name == "payload")
+
+
+def _read_csv(path):
+    with open(path) as f:
+        rows = list(csv.reader(f))
+    return rows[0], np.array(rows[1:], dtype=float)
+
+
+def test_small_trajectory_csv(small_run_1, small_scenario):
+    yourdfpy = pytest.importorskip("yourdfpy")
+    run, out = small_run_1
+    header, table = _read_csv(out / "trajectory.csv")
+    n = run.winner.dof
+    assert header == (["t"] + [f"q{i}" for i in range(1, n + 1)] + [f"qd{i}" for i in range(1, n + 1)]
+                      + [f"tau{i}" for i in range(1, n + 1)] + ["x", "y", "z"])
+    t, q, qd, tau, tool = table[:, 0], table[:, 1:1 + n], table[:, 1 + n:1 + 2 * n], table[:, 1 + 2 * n:1 + 3 * n], table[:, -3:]
+    intervals = small_scenario.optimizer.nodes - 1
+    assert len(t) >= intervals * run.winner.substeps + 1
+    assert t[0] == 0.0 and t[-1] == pytest.approx(run.winner.tf, abs=1e-8)
+    assert np.all(np.diff(t) > 0)
+    assert np.linalg.norm(tool[0] - small_scenario.task.start) <= 1e-3
+    assert np.linalg.norm(tool[-1] - small_scenario.task.goal) <= 1e-3
+    assert np.abs(qd[0]).max() <= 1e-6 and np.abs(qd[-1]).max() <= 1e-6
+
+    model = pin.buildModelFromUrdf(str(out / "winner.urdf"))
+    data = model.createData()
+    vmax, effort = np.asarray(model.velocityLimit), np.asarray(model.effortLimit)
+    assert np.all(np.abs(qd) <= vmax * (1 + 1e-3)), np.max(np.abs(qd) / vmax)
+    assert np.all(np.abs(tau) <= effort * (1 + 1e-3)), np.max(np.abs(tau) / effort)
+    assert np.all(q >= model.lowerPositionLimit - 1e-6) and np.all(q <= model.upperPositionLimit + 1e-6)
+
+    # the tool columns are the URDF's tool0 in the base frame, in Pinocchio and in yourdfpy
+    tool0 = model.getFrameId("tool0")
+    urdf = yourdfpy.URDF.load(str(out / "winner.urdf"))
+    for k in range(len(t)):
+        pin.framesForwardKinematics(model, data, q[k])
+        assert np.allclose(data.oMf[tool0].translation, tool[k], atol=1e-6), k
+    for k in (0, len(t) // 2, len(t) - 1):
+        urdf.update_cfg(q[k])
+        assert np.allclose(urdf.get_transform("tool0", "base_link")[:3, 3], tool[k], atol=1e-6), k
+
+    # physics: with the inverse-dynamics transcription the acceleration is constant between
+    # rows, so tau[k] = RNEA(q[k], qd[k], (qd[k+1] - qd[k]) / dt) from the URDF alone
+    if small_scenario.optimizer.transcription == "inverse":
+        for k in range(len(t)):
+            j = min(k, len(t) - 2)
+            qdd = (qd[j + 1] - qd[j]) / (t[j + 1] - t[j])
+            expected = pin.rnea(model, data, q[k], qd[k], qdd)
+            assert np.allclose(tau[k], expected, atol=1e-4 * effort.max()), (k, tau[k], expected)
+
+
+def test_small_plots_are_pngs(small_run_1):
+    _, out = small_run_1
+    for name in ("joints.png", "pruning.png"):
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 1000, name
+
+
+def test_small_ratio_winner_equals_brute_force_winner(small_run_1, small_cli_none):
+    ratio, _ = small_run_1
+    cli, doc, out = small_cli_none
+    assert cli.exit_code == 0, cli.output
+    assert re.search(rf"^winner +{SMALL_WINNER}$", cli.output, re.M), cli.output
+    assert doc["status"] == "done" and doc["settings"]["pruning"]["rule"] == "none"
+    assert doc["winner"]["composition"] == ratio.winner.name == SMALL_WINNER
+    assert doc["winner"]["tf"] == pytest.approx(ratio.winner.tf, rel=1e-6)
+    none = {c["composition"]: c for c in doc["candidates"]}
+    assert all(c["status"] != "pruned" and c["pruned_at_iteration"] is None for c in none.values())
+    assert doc["counts"]["pruned"] == 0
+    # pruning does not change the other candidates' optimisations, and saves iterations
+    for c in ratio.candidates:
+        if c.status != "pruned":
+            assert (c.status, c.iterations) == (none[c.name]["status"], none[c.name]["iterations"]), c.name
+            assert c.cost == pytest.approx(none[c.name]["cost"], rel=1e-9)
+        else:
+            assert none[c.name]["iterations"] > c.iterations
+            assert none[c.name]["cost_history"][:c.iterations] == pytest.approx(list(c.cost_history), rel=1e-9)
+    assert ratio.iterations < doc["totals"]["optimizer_iterations"]
+    for name in ("winner.urdf", "trajectory.csv", "joints.png", "pruning.png"):
+        assert (out / name).is_file()
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_small_interrupted_run_leaves_a_partial_folder(small_scenario, tmp_path, jobs):
+    seen = []
+
+    def interrupt(stage, figures):
+        if stage == "optimization":
+            seen.append(figures["round"])
+            if figures["round"] == 3:
+                raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_scenario(small_scenario, tmp_path, jobs=jobs, on_progress=interrupt)
+    assert seen == [1, 2, 3]
+    doc = json.loads((tmp_path / "result.json").read_text())
+    assert doc["status"] == "interrupted" and doc["partial"] is True
+    assert doc["winner"] is None
+    assert doc["counts"]["feasible"] == 6
+    assert len(doc["candidates"]) == 6
+    for c in doc["candidates"]:
+        assert c["status"] in ("stopped", "pruned", "optimal", "failed")
+        assert c["iterations"] <= 3 and len(c["cost_history"]) == c["iterations"]
+    assert not (tmp_path / "winner.urdf").exists()
+    deadline = time.monotonic() + 5
+    while multiprocessing.active_children() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert multiprocessing.active_children() == []
+
+
+# --------------------------------------------------------------------------------------------
+# 6. CLI: the paper's 50 kg scenario has no feasible composition
+# --------------------------------------------------------------------------------------------
+
+def test_cli_run_paper_fails_naming_static_torque(tmp_path):
+    result = CliRunner().invoke(main, ["run", str(PAPER_SCENARIO), "--out", str(tmp_path), "--jobs", "2"])
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    assert "Error: no composition is feasible" in result.output
+    assert "static torque test" in result.output
+    match = re.search(r"best torque ratio found: ([0-9.]+) x the limit", result.output)
+    assert match and float(match.group(1)) > 1.0, result.output
+    doc = json.loads((tmp_path / "result.json").read_text())
+    assert doc["status"] == "infeasible" and doc["partial"] is False
+    assert doc["counts"]["enumerated"] == 3108 and doc["counts"]["feasible"] == 0
+    assert "static torque" in doc["message"] and doc["winner"] is None
