@@ -140,6 +140,7 @@ class Candidate:
             solver = ShootingSolver(problem, y0, jacobian=self.jacobian, iteration_offset=offset)
             try:
                 for it in solver.iterate():
+                    it = replace(it, refinement=attempt)
                     self.last = it
                     self.history.append(it.cost)
                     self.violations.append(it.constraint_violation)
@@ -184,7 +185,7 @@ def _verification_failure(v: Verification) -> str:
         parts.append(f"clearance {v.min_clearance:.4f} m < 0 between sub-steps")
     if not v.limits_ok:
         parts.append(f"limits exceeded (velocity x{v.velocity_ratio:.3f}, torque x{v.torque_ratio:.3f}, "
-                     f"position +{v.position_excess:.2g})")
+                     f"position +{v.position_excess:.2g} of the range)")
     return f"verification failed after {v.substeps} sub-steps per interval: " + "; ".join(parts)
 
 

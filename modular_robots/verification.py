@@ -30,7 +30,8 @@ __all__ = ["Verification", "Trajectory", "verify", "sample_trajectory", "TERMINA
 TERMINAL_TOLERANCE = 0.01
 #: Largest scaled defect between a re-integrated interval and the next node (discretisation error).
 DEFECT_TOLERANCE = 1e-3
-#: Relative excess over a velocity or torque limit still counted as "held" on the dense grid.
+#: Relative excess over a velocity or torque limit (or over a position limit, relative to the
+#: joint's range) still counted as "held" on the dense grid.
 LIMIT_TOLERANCE = 1e-3
 #: Penetration still counted as clear on the dense grid [m] (solver tolerance, not physics).
 CLEARANCE_TOLERANCE = 1e-5
@@ -43,7 +44,8 @@ class Verification:
     ``terminal_error`` [m]: tool position at ``tf`` vs the goal's; ``terminal_speed``: largest
     joint speed at ``tf``; ``max_defect``: largest scaled state gap between an interval's
     re-integrated end and the next node (position over its limit range, velocity over its limit); ``min_clearance`` [m]: smallest obstacle distance on the grid (inf
-    without obstacles); ``position_excess``: largest excursion beyond a position limit [rad or m];
+    without obstacles); ``position_excess``: largest excursion beyond a position limit,
+    relative to the joint's range;
     ``velocity_ratio``, ``torque_ratio``: largest ``|value| / limit``; ``grid_points``: samples
     checked; ``substeps``: RK4 sub-steps per interval of the solution.
     """
@@ -64,7 +66,7 @@ class Verification:
 
     @property
     def limits_ok(self) -> bool:
-        return (self.position_excess <= 1e-6 and self.velocity_ratio <= 1.0 + LIMIT_TOLERANCE
+        return (self.position_excess <= LIMIT_TOLERANCE and self.velocity_ratio <= 1.0 + LIMIT_TOLERANCE
                 and self.torque_ratio <= 1.0 + LIMIT_TOLERANCE)
 
     @property
@@ -134,6 +136,8 @@ def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
     grid = np.linspace(0.0, h, S * points_per_substep + 1)
     clearance, pos_excess, vel_ratio, tau_ratio = np.inf, 0.0, 0.0, 0.0
     vmax, tmax = robot.velocity_limit, robot.effort_limit
+    span = np.where(np.isfinite(robot.upper - robot.lower) & (robot.upper > robot.lower),
+                    robot.upper - robot.lower, 1.0)
     for m in range(N):
         node, u = nodes[m], controls[m]
 
@@ -148,7 +152,7 @@ def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
         for s, state in zip(grid, states):
             q, v = state[:nv], state[nv:]
             tau = tr.torque(robot, node, u, s)
-            pos_excess = max(pos_excess, float(np.max(np.maximum(robot.lower - q, q - robot.upper))))
+            pos_excess = max(pos_excess, float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span)))
             vel_ratio = max(vel_ratio, float(np.max(np.abs(v) / vmax)))
             tau_ratio = max(tau_ratio, float(np.max(np.abs(tau) / tmax)))
             if problem.collision is not None:
