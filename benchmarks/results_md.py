@@ -88,6 +88,13 @@ def build() -> str:
                          f"{r['iterations_ratio']} / {r['iterations_none']} | {r['iteration_saving_x']:.2f}x | "
                          f"{r['wall_ratio_s']:.1f} / {r['wall_none_s']:.1f} | {r['wall_saving_x']:.2f}x | "
                          f"{r['pruned']} |")
+        lines += ["", "The ratio rule at other thresholds, replayed on each scenario's brute-force histories "
+                  "(same manager, no re-solve):", "",
+                  "| scenario | threshold | iterations | saving | same winner | pruned |", "|---|---|---|---|---|---|"]
+        for name, d in pruning.get("details", {}).items():
+            for r in d.get("replayed_thresholds", []):
+                lines.append(f"| {name} | {r['threshold']} | {r['iterations']} | {r['saving_x']:.2f}x | "
+                             f"{r['same_winner']} | {r['pruned']} |")
         lines.append("")
     return "\n".join(lines)
 
