@@ -61,7 +61,6 @@ class CollisionModel:
         ]
         self._prim_radii = np.array([p.radius for p in self._primitives], dtype=float)
         self._prim_lengths = np.array([p.length for p in self._primitives], dtype=float)
-        self._prim_offsets = np.array([p.offset for p in self._primitives], dtype=float)
         self._centers = np.array([o.center for o in self.obstacles], dtype=float).reshape(-1, 3)
         self._radii = np.array([o.radius for o in self.obstacles], dtype=float)
         self._obstacle_objects = [
@@ -70,23 +69,10 @@ class CollisionModel:
         ]
 
     def _axes(self, q: np.ndarray, kinematics_done: bool = False):
-        """Rotations ``(P, 3, 3)`` and axis end points ``a``, ``b`` ``(P, 3)`` of the primitives."""
-        model, data = self.robot.model, self.robot.data
-        if not kinematics_done:
-            pin.framesForwardKinematics(model, data, np.asarray(q, dtype=float))
-        poses = [data.oMf[fid] for fid in self._frame_ids]
-        rot = np.array([pose.rotation for pose in poses]).reshape(-1, 3, 3)
-        a = np.array([pose.translation for pose in poses]).reshape(-1, 3) + self._prim_offsets[:, None] * rot[:, :, 2]
-        b = a + self._prim_lengths[:, None] * rot[:, :, 2]
-        return rot, a, b
+        return self.robot.primitive_axes(None if kinematics_done else q, self.primitive_indices)
 
     def _place_one(self, i: int, rot, a, b) -> None:
         self._robot_objects[i].setTransform(fcl.Transform(rot[i], 0.5 * (a[i] + b[i])))
-
-    @property
-    def pairs(self) -> int:
-        """Number of (primitive, obstacle) pairs."""
-        return len(self._robot_objects) * len(self._obstacle_objects)
 
     def distances(self, q: np.ndarray) -> Distances:
         """Signed distance of every (primitive, obstacle) pair at configuration ``q``."""

@@ -128,27 +128,26 @@ class RobotModel:
             pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
         )[:3].copy()
 
+    def primitive_axes(self, q: np.ndarray | None, indices: Sequence[int] | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Frame rotations ``(P, 3, 3)`` and axis end points ``a``, ``b`` ``(P, 3)`` in the base
+        frame of the primitives ``indices`` (default all). ``q=None`` reuses the frame placements
+        already computed in :attr:`data`."""
+        if q is not None:
+            pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        indices = range(len(self.primitives)) if indices is None else indices
+        poses = [self.data.oMf[self._primitive_frames[i]] for i in indices]
+        offsets = np.array([self.primitives[i].offset for i in indices], dtype=float)
+        lengths = np.array([self.primitives[i].length for i in indices], dtype=float)
+        rot = np.array([pose.rotation for pose in poses]).reshape(-1, 3, 3)
+        a = np.array([pose.translation for pose in poses]).reshape(-1, 3) + offsets[:, None] * rot[:, :, 2]
+        return rot, a, a + lengths[:, None] * rot[:, :, 2]
+
     def primitive_segments(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """End points ``(a, b)``, each ``(n_primitives, 3)``, of every primitive's axis in the
         base frame; ``a == b`` for spheres."""
-        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
-        a = np.empty((len(self.primitives), 3))
-        b = np.empty_like(a)
-        for i, (p, fid) in enumerate(zip(self.primitives, self._primitive_frames)):
-            pose = self.data.oMf[fid]
-            axis = pose.rotation[:, 2]
-            a[i] = pose.translation + p.offset * axis
-            b[i] = a[i] + p.length * axis
+        _, a, b = self.primitive_axes(q)
         return a, b
-
-    def primitive_placements(self, q: np.ndarray) -> list[pin.SE3]:
-        """Pose of each primitive's centre, z along its axis (the FCL convention)."""
-        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
-        out = []
-        for p, fid in zip(self.primitives, self._primitive_frames):
-            local = pin.SE3(np.eye(3), np.array([0.0, 0.0, p.offset + p.length / 2.0]))
-            out.append(self.data.oMf[fid] * local)
-        return out
 
     # -- dynamics ---------------------------------------------------------------------------
     def rnea(self, q, v, a) -> np.ndarray:

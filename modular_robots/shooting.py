@@ -234,11 +234,7 @@ class ShootingProblem:
         """Row layout, bounds and the fixed sparsity pattern of the constraint Jacobian."""
         N, S, n, nv = self.intervals, self.substeps, self.nx, self.nv
         p = n + nv + 1
-        cols = np.empty((N, p), dtype=int)
-        for m in range(N):
-            cols[m, :n] = 1 + (m - 1) * n + np.arange(n) if m >= 1 else -1
-            cols[m, n:n + nv] = self._u0 + m * nv + np.arange(nv)
-            cols[m, -1] = 0
+        cols = self._cols = np.array([self._interval_columns(m) for m in range(N)])
         pairs = len(self.obstacles) if self.collision else 0
         blocks = [("continuity", 1, n), ("path", S - 1, n), ("clearance", S, pairs)]
         if not self.transcription.controls_are_torques:
@@ -358,14 +354,13 @@ class ShootingProblem:
         if derivatives:
             local = 2.0 * tf * np.einsum("j,mjk,mjkp->mp", weights, ratio / self.tau_scale, prop.torque_sens)
             local[:, -1] += per_interval
-            for m in range(N):
-                cols = self._interval_columns(m)
-                mask = cols >= 0
-                np.add.at(grad, cols[mask], local[m, mask])
+            mask = self._cols >= 0
+            np.add.at(grad, self._cols[mask], local[mask])
             grad *= self.variable_scale / self.tf_guess
         return cost, grad
 
     def _interval_columns(self, m: int) -> np.ndarray:
+        """Global columns of interval ``m``'s parameters ``(s_m, u_m, tf)``; -1 for fixed ``s_0``."""
         n, nv = self.nx, self.nv
         state = 1 + (m - 1) * n + np.arange(n) if m >= 1 else np.full(n, -1)
         return np.concatenate([state, self._u0 + m * nv + np.arange(nv), [0]])
@@ -382,11 +377,3 @@ class ShootingProblem:
 
     def constraint_jacobian(self, y: np.ndarray) -> sparse.csr_matrix:
         return self.evaluate(y).jacobian
-
-    def violation(self, y: np.ndarray) -> float:
-        """Largest scaled constraint or bound violation at ``y`` (0 when feasible)."""
-        c = self.constraints(y)
-        worst = max(np.max(self.constraint_lower - c, initial=0.0), np.max(c - self.constraint_upper, initial=0.0))
-        y = np.asarray(y, dtype=float)
-        worst_bound = max(np.max(self.variable_lower - y, initial=0.0), np.max(y - self.variable_upper, initial=0.0))
-        return float(max(worst, worst_bound))
