@@ -413,6 +413,47 @@ def test_ur5_with_payload_solves_and_verifies():
     assert result.tf >= np.max(np.abs(q_goal - q_start) / robot.velocity_limit)
 
 
+def test_midpoint_position_rows_are_the_parabola_midpoints(paper):
+    """Second formulation: the rows that bound the positions inside each sub-step hold
+    ``q_j + v_j h / 2 + a h^2 / 8`` of the inverse transcription's exact parabola."""
+    problem = paper(MIXED, "inverse", substeps=4)
+    y = perturbed_guess(problem, seed=3)
+    tf, nodes, acc = problem.unpack(y)
+    N, S, nv = problem.intervals, problem.substeps, problem.nv
+    h = tf / (N * S)
+    expected = np.empty((N, S, nv))
+    for m in range(N):
+        for j in range(S):
+            t = (j + 0.5) * h
+            expected[m, j] = nodes[m, :nv] + nodes[m, nv:] * t + 0.5 * acc[m] * t * t
+    full = np.full(len(problem.row_scale), np.nan)
+    full[problem._keep_row] = problem.constraints(y)
+    rows = problem._rows["inner"]
+    got = (full[rows.ravel()] * problem.row_scale[rows.ravel()]).reshape(N, S, nv)
+    assert np.allclose(got, expected, rtol=0, atol=1e-12)
+    # bounded like positions, and the prismatic joint's midpoints do move
+    keep = np.cumsum(problem._keep_row) - 1
+    lower = problem.constraint_lower[keep[rows]] * problem.row_scale[rows]
+    assert np.allclose(lower, np.broadcast_to(problem.robot.lower, lower.shape))
+    assert np.ptp(got[..., problem.robot.upper - problem.robot.lower < 1.0]) > 1e-3
+
+
+def test_verification_defect_catches_a_plan_the_dynamics_do_not_follow():
+    """Against the optimum of the two-link arm, one control changed by 2 % after the solve:
+    the sub-step re-integration no longer ends on the plan's next node."""
+    robot = planar_arm()
+    problem = ShootingProblem(robot, ARM_START, ARM_GOAL, settings=OptimizerSettings(nodes=6, substeps=4,
+                                                                                       transcription="inverse"))
+    outcome = ShootingSolver(problem).solve()
+    assert outcome.status == "optimal", outcome.reason
+    good = verify(problem, outcome.final.y)
+    assert good.max_defect < 1e-6 and good.terminal_ok, good  # (its torque may peak between sub-steps)
+    y = outcome.final.y.copy()
+    y[problem._u0 + 2 * problem.nv] *= 1.02  # interval 2, joint 1 acceleration
+    bad = verify(problem, y)
+    assert not bad.defect_ok and bad.max_defect > 10 * good.max_defect, bad
+
+
 # --------------------------------------------------------------------------------------------
 # 5. the solver's generator semantics
 # --------------------------------------------------------------------------------------------
