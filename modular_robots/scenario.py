@@ -50,11 +50,21 @@ class OptimizerSettings:
 @dataclass(frozen=True)
 class PruningSettings:
     """Step D settings: ``ratio`` prunes candidate k at iteration l >= ``start_iteration`` when
-    ``(c_k,l - c_min,l) / c_min,l > threshold``; ``none`` optimises every candidate."""
+    ``(c_k,l - c_min,l) / c_min,l > threshold``; ``none`` optimises every candidate.
+
+    The guard's two refinements (see :mod:`~modular_robots.pruning`): a candidate is judged only
+    when it was trusted ``window`` iterations ago too, and kept while the fall of its cost over
+    the window, repeated ``lookahead`` times, would bring it within the threshold (``window = 0``
+    turns this off); one not trusted for ``patience`` iterations in a row is pruned once there is
+    a reference (``0`` turns this off). Defaults chosen on replays of brute-force runs (README).
+    """
 
     rule: str = "ratio"
     threshold: float = 0.5
     start_iteration: int = 2
+    window: int = 10
+    lookahead: float = 2.0
+    patience: int = 75
 
 
 @dataclass(frozen=True)
@@ -148,6 +158,9 @@ def _read_pruning(f: Fields | None) -> PruningSettings:
         rule=f.string("rule", default=d.rule, choices=RULES),
         threshold=f.number("threshold", default=d.threshold, exclusive_minimum=0.0),
         start_iteration=f.integer("start_iteration", default=d.start_iteration, minimum=1),
+        window=f.integer("window", default=d.window, minimum=0),
+        lookahead=f.number("lookahead", default=d.lookahead, minimum=0.0),
+        patience=f.integer("patience", default=d.patience, minimum=0),
     )
     f.done()
     return settings

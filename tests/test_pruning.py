@@ -130,6 +130,10 @@ class RecordingExecutor:
         self.inner.shutdown()
 
 
+#: The ratio rule without the guard's progress window and patience (scripts are short).
+BARE = {"window": 0, "lookahead": 0.0, "patience": 0}
+
+
 def make_executor(scripts, jobs=1, log=None):
     names = [s.name for s in scripts]
     if jobs == 1:
@@ -137,9 +141,12 @@ def make_executor(scripts, jobs=1, log=None):
     return ProcessExecutor(fake_factory, None, list(scripts), names, jobs)
 
 
-def run_fakes(scripts, rule="ratio", threshold=0.5, start_iteration=2, jobs=1, log=None):
-    """Run ``scripts`` under the manager; return (results by name, list of Progress)."""
-    manager = PruningManager(make_executor(scripts, jobs, log), PruningSettings(rule, threshold, start_iteration))
+def run_fakes(scripts, rule="ratio", threshold=0.5, start_iteration=2, jobs=1, log=None, **guard):
+    """Run ``scripts`` under the manager; return (results by name, list of Progress). The guard's
+    progress window and patience are off unless given (the scripts are a few iterations long)."""
+    guard = {**BARE, **guard}
+    settings = PruningSettings(rule, threshold, start_iteration, **guard)
+    manager = PruningManager(make_executor(scripts, jobs, log), settings)
     progress = list(manager.rounds())
     assert list(manager.results) == [s.name for s in scripts]  # the executor's order
     return manager.results, progress
@@ -150,13 +157,24 @@ def summary(results) -> list[tuple]:
             for r in results.values()]
 
 
-def expected_outcome(scripts, rule, threshold, start_iteration, guard=GUARD_VIOLATION) -> dict:
-    """An independent re-statement of SPEC §6 with the documented guard: name -> (status,
-    iterations, pruned_at_iteration)."""
+def expected_outcome(scripts, rule, threshold, start_iteration, guard=GUARD_VIOLATION, window=0,
+                     lookahead=0.0, patience=0) -> dict:
+    """An independent re-statement of SPEC §6 with the documented guard, its progress window and
+    its patience: name -> (status, iterations, pruned_at_iteration)."""
     by_name = {s.name: s for s in scripts}
     alive = [s.name for s in scripts]
     out, converged = {}, {}
     round_ = 0
+
+    def trusted_cost(name, r):  # the cost of round r (1-based) if that iterate is trusted
+        return by_name[name].costs[r - 1] if by_name[name].violation(r - 1) <= guard else None
+
+    def untrusted_run(name, r):  # rounds in a row up to r whose iterate was not trusted
+        k = 0
+        while r - k >= 1 and trusted_cost(name, r - k) is None:
+            k += 1
+        return k
+
     while alive:
         round_ += 1
         for name in alive:
@@ -172,8 +190,14 @@ def expected_outcome(scripts, rule, threshold, start_iteration, guard=GUARD_VIOL
             if trusted and min(trusted) > 0:
                 ref = min(trusted)
                 for n, (c, v) in now.items():
-                    if v <= guard and c - ref > threshold * ref:
-                        out[n] = ("pruned", round_, round_)
+                    if v > guard:
+                        if patience and untrusted_run(n, round_) >= patience:
+                            out[n] = ("pruned", round_, round_)
+                    elif c - ref > threshold * ref:
+                        before = trusted_cost(n, round_ - window) if round_ - window >= 1 else None
+                        # still converging: the window's fall, repeated lookahead times, reaches the threshold
+                        if window == 0 or (before is not None and c - lookahead * (before - c) > (1 + threshold) * ref):
+                            out[n] = ("pruned", round_, round_)
             alive = [n for n in alive if n not in out]
     return out
 
@@ -239,6 +263,30 @@ def test_ratio_rule_guard():
     assert ratio_rule({"c": 1.5}, {"c": 0.0}, {"z": 1.0}, 2) == set()
     # a custom guard
     assert ratio_rule({"a": 1.0, "c": 2.0}, {"a": 0.05, "c": 0.0}, {}, 2, guard_violation=0.1) == {"c"}
+
+
+def test_progress_guard_keeps_a_candidate_whose_cost_is_still_falling():
+    costs, violations = {"a": 1.0, "b": 2.0}, {"a": 0.0, "b": 0.0}
+    # b is 100 % worse than a (threshold 1.5): over the window it fell from 2.25 to 2.0
+    assert ratio_rule(costs, violations, {}, 5, earlier={"b": 2.25}, lookahead=2.0) == set()  # 2 - 0.5 = 1.5
+    assert ratio_rule(costs, violations, {}, 5, earlier={"b": 2.25}, lookahead=1.0) == {"b"}  # 1.75
+    assert ratio_rule(costs, violations, {}, 5, earlier={"b": 2.0}, lookahead=100.0) == {"b"}  # stalled
+    assert ratio_rule(costs, violations, {}, 5, earlier={"b": 1.9}, lookahead=2.0) == {"b"}  # rising
+    # not trusted a window ago: too new to judge
+    assert ratio_rule(costs, violations, {}, 5, earlier={}, lookahead=2.0) == set()
+    # the guard never prunes below the threshold
+    assert ratio_rule({"a": 1.0, "b": 1.4}, violations, {}, 5, earlier={"b": 1.4}, lookahead=0.0) == set()
+
+
+def test_patience_prunes_a_candidate_that_stays_untrusted():
+    costs, violations = {"a": 1.0, "b": 0.5}, {"a": 0.0, "b": 1.0}
+    assert ratio_rule(costs, violations, {}, 60, untrusted_for={"b": 50}, patience=50) == {"b"}
+    assert ratio_rule(costs, violations, {}, 60, untrusted_for={"b": 49}, patience=50) == set()
+    assert ratio_rule(costs, violations, {}, 60, untrusted_for={"b": 50}, patience=0) == set()
+    # without a trusted reference nobody is pruned, however long
+    assert ratio_rule(costs, {"a": 1.0, "b": 1.0}, {}, 60, untrusted_for={"a": 60, "b": 60}, patience=50) == set()
+    assert ratio_rule(costs, {"a": 1.0, "b": 1.0}, {"z": 2.0}, 60, untrusted_for={"a": 60, "b": 60},
+                      patience=50) == {"a", "b"}
 
 
 def test_ratio_rule_without_a_positive_reference_prunes_nobody():
@@ -366,15 +414,17 @@ def test_candidate_without_iterates():
 
 def test_random_scripts_match_the_rule_statement():
     rng = np.random.default_rng(20240506)
-    for trial in range(60):
+    for trial in range(120):
         scripts = random_scripts(rng, int(rng.integers(1, 7)))
         threshold = float(rng.choice([0.2, 0.5, 1.0]))
         start = int(rng.integers(1, 4))
         rule = "ratio" if trial % 5 else "none"
-        results, progress = run_fakes(scripts, rule, threshold, start)
-        expected = expected_outcome(scripts, rule, threshold, start)
+        guard = {"window": int(rng.choice([0, 1, 3])), "lookahead": float(rng.choice([0.0, 1.0, 4.0])),
+                 "patience": int(rng.choice([0, 2, 4]))}
+        results, progress = run_fakes(scripts, rule, threshold, start, **guard)
+        expected = expected_outcome(scripts, rule, threshold, start, **guard)
         got = {r.name: (r.status, r.iterations, r.pruned_at_iteration) for r in results.values()}
-        assert got == expected, (trial, scripts, threshold, start)
+        assert got == expected, (trial, scripts, threshold, start, guard)
         for r in results.values():
             assert r.cost_history == by_name(scripts)[r.name].costs[:r.iterations]
         assert sum(len(p.pruned) for p in progress) == sum(r.status == "pruned" for r in results.values())
@@ -409,7 +459,7 @@ def test_lockstep_every_live_candidate_advances_once_per_round(rule):
         Script("e", (1.4, 1.4, 1.4, 1.6, 1.6, 1.6)),  # pruned in round 4 under ratio
     ]
     log = []
-    manager = PruningManager(RecordingExecutor(make_executor(scripts, 1, log), log), PruningSettings(rule))
+    manager = PruningManager(RecordingExecutor(make_executor(scripts, 1, log), log), PruningSettings(rule, **BARE))
     for progress in manager.rounds():
         log.append(("progress", progress))
     rounds = split_rounds(log)
@@ -449,7 +499,7 @@ def test_lockstep_every_live_candidate_advances_once_per_round(rule):
 def test_closing_the_rounds_early_stops_the_live_candidates():
     scripts = [Script("a", (1.0,) * 6), Script("b", (1.1,) * 2), Script("c", (1.2,) * 6)]
     log = []
-    manager = PruningManager(RecordingExecutor(make_executor(scripts, 1, log), log), PruningSettings())
+    manager = PruningManager(RecordingExecutor(make_executor(scripts, 1, log), log), PruningSettings(**BARE))
     rounds = manager.rounds()
     for progress in rounds:
         if progress.round == 4:
@@ -501,7 +551,7 @@ def _nan_equal(a, b):
 def test_workers_advance_in_lockstep():
     scripts = SCRIPT_SETS[1] + [Script("e", (1.0,) * 3)]
     log = []
-    manager = PruningManager(RecordingExecutor(make_executor(scripts, 2), log), PruningSettings())
+    manager = PruningManager(RecordingExecutor(make_executor(scripts, 2), log), PruningSettings(**BARE))
     alive = {s.name for s in scripts}
     for progress in manager.rounds():
         advances = [e for e in log if e[0] == "advance"]
@@ -539,7 +589,7 @@ def test_ctrl_c_while_waiting_for_a_worker_leaves_candidate_results():
     scripts = [Script(n, (1.0,) * 20) for n in "abcd"]
     executor = make_executor(scripts, 2)
     executor._conns = [_InterruptingConnection(c) for c in executor._conns]
-    manager = PruningManager(executor, PruningSettings())
+    manager = PruningManager(executor, PruningSettings(**BARE))
     with pytest.raises(KeyboardInterrupt):
         for progress in manager.rounds():
             if progress.round == 2:
@@ -556,7 +606,7 @@ def broken_factory(context, spec: Script):
 
 def test_factory_error_propagates_in_process():
     scripts = [Script("a", (1.0,) * 3), Script("bad", (1.0,) * 3)]
-    manager = PruningManager(InProcessExecutor(broken_factory, None, scripts, ["a", "bad"]), PruningSettings())
+    manager = PruningManager(InProcessExecutor(broken_factory, None, scripts, ["a", "bad"]), PruningSettings(**BARE))
     try:
         manager.run()
     except Exception as exc:  # noqa: BLE001 - which exception is the point
@@ -569,7 +619,7 @@ def test_a_dead_worker_does_not_leave_the_others_running():
     executor = ProcessExecutor(broken_factory, None, scripts, names, 2)
     try:
         with pytest.raises(Exception):
-            PruningManager(executor, PruningSettings()).run()
+            PruningManager(executor, PruningSettings(**BARE)).run()
         for proc in executor._procs:
             proc.join(timeout=1)
         assert not any(proc.is_alive() for proc in executor._procs)
@@ -632,7 +682,8 @@ def test_small_result_json(small_run_1):
     doc = json.loads((out / "result.json").read_text())
     assert doc["status"] == "done" and doc["partial"] is False
     assert doc["scenario"] == "small"
-    assert doc["settings"]["pruning"] == {"rule": "ratio", "threshold": 0.5, "start_iteration": 2}
+    assert doc["settings"]["pruning"] == {"rule": "ratio", "threshold": 0.5, "start_iteration": 2, "window": 10,
+                                          "lookahead": 2.0, "patience": 75}
     counts = doc["counts"]
     assert counts["enumerated"] == 516 and counts["feasible"] == 6 and counts["optimized"] == 6
     assert sum(counts["removed"].values()) == 516 - 6
