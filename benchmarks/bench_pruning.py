@@ -36,6 +36,8 @@ def _summary(result) -> dict:
 
 
 THRESHOLDS = (0.5, 1.0, 1.5, 2.0)
+#: The guard's progress window and patience off (the bare rule) and at the defaults.
+GUARDS = {"bare": {"window": 0, "patience": 0}, "default": {}}
 
 
 class _Replay:
@@ -70,19 +72,20 @@ class _Replay:
 
 
 def replay(brute, scenario) -> list[dict]:
-    """The ratio rule at several thresholds, replayed on the brute-force histories."""
+    """The ratio rule at several thresholds, bare and with the default guard, replayed on the
+    brute-force histories."""
     truth = brute.winner.name
     total = sum(len(r.cost_history) for r in brute.candidates)
     rows = []
-    for threshold in THRESHOLDS:
-        manager = PruningManager(_Replay(brute.candidates), replace(scenario.pruning, rule="ratio",
-                                                                      threshold=threshold))
-        results = manager.run()
-        used = sum(r.iterations if r.status != "pruned" else r.pruned_at_iteration for r in results)
-        optimal = [r for r in results if r.status == "optimal"]
-        winner = min(optimal, key=lambda r: (r.cost, r.name)).name
-        rows.append({"threshold": threshold, "iterations": used, "saving_x": total / used,
-                     "same_winner": winner == truth, "pruned": sum(r.status == "pruned" for r in results)})
+    for guard, overrides in GUARDS.items():
+        for threshold in THRESHOLDS:
+            settings = replace(scenario.pruning, rule="ratio", threshold=threshold, **overrides)
+            results = PruningManager(_Replay(brute.candidates), settings).run()
+            used = sum(r.iterations if r.status != "pruned" else r.pruned_at_iteration for r in results)
+            optimal = [r for r in results if r.status == "optimal"]
+            winner = min(optimal, key=lambda r: (r.cost, r.name)).name
+            rows.append({"guard": guard, "threshold": threshold, "iterations": used, "saving_x": total / used,
+                         "same_winner": winner == truth, "pruned": sum(r.status == "pruned" for r in results)})
     return rows
 
 
