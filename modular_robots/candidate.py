@@ -180,7 +180,7 @@ def _verification_failure(v: Verification) -> str:
     if not v.terminal_ok:
         parts.append(f"terminal error {v.terminal_error * 100:.2f} cm > 1 cm")
     if not v.defect_ok:
-        parts.append(f"defect {v.max_defect:.2g} between an interval's re-integration and the next node")
+        parts.append(f"defect {v.max_defect:.2g} (an interval's summed sub-step re-integration gaps)")
     if not v.clearance_ok:
         parts.append(f"clearance {v.min_clearance:.4f} m < 0 between sub-steps")
     if not v.limits_ok:

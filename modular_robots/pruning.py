@@ -102,7 +102,7 @@ def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], conv
         if (c - reference) / reference <= threshold:
             continue
         if earlier is not None and (k not in earlier
-                                    or c - lookahead * (earlier[k] - c) <= (1.0 + threshold) * reference):
+                                    or (c - lookahead * (earlier[k] - c) - reference) / reference <= threshold):
             continue
         chosen.add(k)
     return chosen
@@ -302,7 +302,7 @@ class PruningManager:
     guard_violation: float = GUARD_VIOLATION
     results: dict[str, CandidateResult] = field(default_factory=dict)
     last: dict[str, Iterate] = field(default_factory=dict)
-    #: Per live candidate: its trusted cost (None if untrusted) in each of the last window + 1
+    #: Per candidate seen: its trusted cost (None if untrusted) in each of its last window + 1
     #: rounds, and how many rounds in a row its iterate has not been trusted.
     trusted: dict[str, deque] = field(default_factory=dict)
     untrusted_for: dict[str, int] = field(default_factory=dict)

@@ -9,7 +9,7 @@ nodes); obstacle clearance ``>= margin`` at every sub-step; torque limits (plain
 controls are torques, else at every sub-step). Jacobians are exact and assembled sparse.
 
 Between the sub-steps a motion could break a position limit unseen (measured on paper-5kg: a
-prismatic stroke overshooting its end by 0.1 % of its range). So the position limits are also kept
+prismatic stroke overshooting its end by 0.1-0.2 % of its range). So the position limits are also kept
 at every sub-step's midpoint, on the cubic Hermite interpolant of its end states,
 ``(q_j + q_{j+1}) / 2 + h (v_j - v_{j+1}) / 8`` (``h`` the sub-step's duration; exact for the
 inverse transcription's parabolas); for a parabola this cuts the largest unseen overshoot from
@@ -260,7 +260,7 @@ class ShootingProblem:
         p = n + nv + 1
         cols = self._cols = np.array([self._interval_columns(m) for m in range(N)])
         pairs = len(self.obstacles) if self.collision else 0
-        blocks = [("continuity", 1, n), ("path", S - 1, n), ("inner", S * len(POSITION_FRACTIONS), nv),
+        blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S * len(POSITION_FRACTIONS), nv),
                   ("clearance", S, pairs)]
         if not self.transcription.controls_are_torques:
             blocks.append(("torque", S + 1, nv))
@@ -275,7 +275,7 @@ class ShootingProblem:
             elif name == "path":
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (self._x_lo, self._x_hi))
                 sc = np.broadcast_to(self.x_scale, (N, k, r))
-            elif name == "inner":
+            elif name == "midpoint":
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (self._x_lo[:nv], self._x_hi[:nv]))
                 sc = np.broadcast_to(self.x_scale[:nv], (N, k, r))
             elif name == "clearance":
@@ -332,12 +332,12 @@ class ShootingProblem:
         if not (np.all(np.isfinite(prop.states)) and np.all(np.isfinite(prop.torques))):
             raise NonFiniteError(f"the dynamics of {self.robot.name!r} gave non-finite states or torques "
                                  f"(tf = {tf:.4g} s)")
-        inner_q, inner_sens = self._between_substeps(tf, prop, derivatives)
+        middle_q, middle_sens = self._between_substeps(tf, prop, derivatives)
         clear, clear_grad = self._clearance(prop.states[:, :S, :nv].reshape(-1, nv), derivatives)
         values = [
             (prop.states[:, S] - nodes[1:]).ravel(),
             prop.states[:, 1:S].ravel(),
-            inner_q.ravel(),
+            middle_q.ravel(),
             clear.ravel(),
         ]
         if not self.transcription.controls_are_torques:
@@ -346,7 +346,7 @@ class ShootingProblem:
         cost, cost_grad = self._cost(tf, prop, derivatives)
         jac = None
         if derivatives:
-            blocks = [prop.state_sens[:, S], prop.state_sens[:, 1:S], inner_sens]
+            blocks = [prop.state_sens[:, S], prop.state_sens[:, 1:S], middle_sens]
             if self.collision is not None:
                 blocks.append(clear_grad.reshape(N, S, -1, nv) @ prop.state_sens[:, :S, :nv])
             if not self.transcription.controls_are_torques:
@@ -367,14 +367,14 @@ class ShootingProblem:
         q, v = prop.states[:, :, :nv], prop.states[:, :, nv:]
         w = _HERMITE  # (F, 4): weights of q_j, h v_j, q_{j+1}, h v_{j+1}
         ends = (q[:, :S, None], h * v[:, :S, None], q[:, 1:, None], h * v[:, 1:, None])
-        inner = sum(w[:, i, None] * x for i, x in enumerate(ends))
+        middle = sum(w[:, i, None] * x for i, x in enumerate(ends))
         if not derivatives:
-            return inner, None
+            return middle, None
         dq, dv = prop.state_sens[:, :, :nv], prop.state_sens[:, :, nv:]
         ends = (dq[:, :S, None], h * dv[:, :S, None], dq[:, 1:, None], h * dv[:, 1:, None])
         sens = sum(w[:, i, None, None] * x for i, x in enumerate(ends))
         sens[..., -1] += (w[:, 1, None] * v[:, :S, None] + w[:, 3, None] * v[:, 1:, None]) / (N * S)
-        return inner, sens
+        return middle, sens
 
     def _clearance(self, qs: np.ndarray, derivatives: bool):
         if self.collision is None:

@@ -124,6 +124,10 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 3, got 1"),
         ("threshold: 0.5", "threshold: half", "threshold:", "pruning.threshold: expected a number, got the string 'half'"),
         ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, none; got 'greedy'"),
+        ("threshold: 0.5", "threshold: 0.5\n  patience: -1", "patience:",
+         "pruning.patience: expected an integer >= 0, got -1"),
+        ("threshold: 0.5", "threshold: 0.5\n  lookahead: soon", "lookahead:",
+         "pruning.lookahead: expected a number, got the string 'soon'"),
         ("center: [1.5, -1.3, 1.1], radius: 0.30", "center: [0.1, 0.0, 0.0], radius: 0.30", "- sphere:",
          "task.obstacles[0].sphere: the obstacle contains the robot's base at the origin (centre [0.1, 0.0, 0.0], radius 0.3)"),
         ("center: [1.5, -1.3, 1.1], radius: 0.30", "center: [1.5, 1.5, 1.9], radius: 0.30", "- sphere:",
@@ -132,7 +136,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
          "catalog: no catalogue file at {dir}/catalogs/missing.yaml"),
     ],
     ids=["nan-target", "short-goal", "negative-payload", "unknown-cost", "unknown-key", "self-collision", "too-few-nodes",
-         "threshold-type", "unknown-rule", "obstacle-contains-base", "obstacle-contains-start", "missing-catalog"],
+         "threshold-type", "unknown-rule", "negative-patience", "lookahead-type", "obstacle-contains-base", "obstacle-contains-start", "missing-catalog"],
 )
 def test_scenario_errors_name_file_line_key(tmp_path, old, new, needle, message):
     path = _scenario(tmp_path, old, new)
@@ -154,5 +158,6 @@ def test_shipped_scenarios_load():
     assert paper.task.payload == 50.0 and paper.task.start == (1.5, 1.5, 2.0) and paper.task.goal == (-2.0, -1.2, 0.6)
     assert [(o.center, o.radius) for o in paper.task.obstacles] == [((1.5, -1.3, 1.1), 0.3), ((-1.2, 2.1, 0.8), 0.35)]
     assert (paper.optimizer.nodes, paper.pruning.rule, paper.pruning.threshold, paper.pruning.start_iteration) == (8, "ratio", 0.5, 2)
+    assert (paper.pruning.window, paper.pruning.lookahead, paper.pruning.patience) == (10, 2.0, 75)  # defaults
     five = load_scenario(PAPER_SCENARIO.with_name("paper-5kg.yaml"))
     assert five.task.payload == 5.0 and five.task.obstacles == paper.task.obstacles and five.catalog == paper.catalog

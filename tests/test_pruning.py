@@ -193,10 +193,11 @@ def expected_outcome(scripts, rule, threshold, start_iteration, guard=GUARD_VIOL
                     if v > guard:
                         if patience and untrusted_run(n, round_) >= patience:
                             out[n] = ("pruned", round_, round_)
-                    elif c - ref > threshold * ref:
+                    elif (c - ref) / ref > threshold:
                         before = trusted_cost(n, round_ - window) if round_ - window >= 1 else None
-                        # still converging: the window's fall, repeated lookahead times, reaches the threshold
-                        if window == 0 or (before is not None and c - lookahead * (before - c) > (1 + threshold) * ref):
+                        # kept while the cost projected lookahead windows ahead is within the threshold
+                        projected = None if before is None else c - lookahead * (before - c)
+                        if window == 0 or (projected is not None and (projected - ref) / ref > threshold):
                             out[n] = ("pruned", round_, round_)
             alive = [n for n in alive if n not in out]
     return out
@@ -267,7 +268,7 @@ def test_ratio_rule_guard():
 
 def test_progress_guard_keeps_a_candidate_whose_cost_is_still_falling():
     costs, violations = {"a": 1.0, "b": 2.0}, {"a": 0.0, "b": 0.0}
-    # b is 100 % worse than a (threshold 1.5): over the window it fell from 2.25 to 2.0
+    # b is 100 % worse than a (pruned above 1.5): over the window it fell from 2.25 to 2.0
     assert ratio_rule(costs, violations, {}, 5, earlier={"b": 2.25}, lookahead=2.0) == set()  # 2 - 0.5 = 1.5
     assert ratio_rule(costs, violations, {}, 5, earlier={"b": 2.25}, lookahead=1.0) == {"b"}  # 1.75
     assert ratio_rule(costs, violations, {}, 5, earlier={"b": 2.0}, lookahead=100.0) == {"b"}  # stalled

@@ -428,7 +428,7 @@ def test_midpoint_position_rows_are_the_parabola_midpoints(paper):
             expected[m, j] = nodes[m, :nv] + nodes[m, nv:] * t + 0.5 * acc[m] * t * t
     full = np.full(len(problem.row_scale), np.nan)
     full[problem._keep_row] = problem.constraints(y)
-    rows = problem._rows["inner"]
+    rows = problem._rows["midpoint"]
     got = (full[rows.ravel()] * problem.row_scale[rows.ravel()]).reshape(N, S, nv)
     assert np.allclose(got, expected, rtol=0, atol=1e-12)
     # bounded like positions, and the prismatic joint's midpoints do move
@@ -438,9 +438,11 @@ def test_midpoint_position_rows_are_the_parabola_midpoints(paper):
     assert np.ptp(got[..., problem.robot.upper - problem.robot.lower < 1.0]) > 1e-3
 
 
-def test_verification_defect_catches_a_plan_the_dynamics_do_not_follow():
-    """Against the optimum of the two-link arm, one control changed by 2 % after the solve:
-    the sub-step re-integration no longer ends on the plan's next node."""
+def test_verification_defect_catches_a_broken_plan():
+    """Against the optimum of the two-link arm, one control changed by 2 % after the solve: the
+    re-integrated interval no longer ends on the plan's next node (for the inverse transcription
+    each sub-step follows its parabola exactly, so the defect is the continuity gap; the forward
+    transcription's RK4 error is caught in the refinement test below)."""
     robot = planar_arm()
     problem = ShootingProblem(robot, ARM_START, ARM_GOAL, settings=OptimizerSettings(nodes=6, substeps=4,
                                                                                        transcription="inverse"))
