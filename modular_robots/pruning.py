@@ -17,8 +17,10 @@ same holds for the other side of the comparison: a candidate is pruned only on a
 its own, because trust-constr typically lengthens ``tf`` while it restores feasibility and
 shortens it afterwards (measured on the small test scenario: the eventual winner went from 1.57 s
 to 3.44 s and back to 1.57 s, and the unguarded rule pruned it at 3.44 s). A candidate that has
-converged is never pruned, and neither is one that is re-solving after a failed verification
-(its iterates are transients of the refinement, not estimates of its optimum).
+converged is never pruned. One that is re-solving after a failed verification is judged on the
+optimum of its previous solve, not on its iterates (they are transients of the refinement): for
+the inverse transcription the refined problem keeps every constraint of the coarse one and adds
+more, so that optimum is a lower bound of what the re-solve can reach.
 
 Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSettings`:
 
@@ -77,7 +79,7 @@ def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], conv
                iteration: int, threshold: float = 0.5, start_iteration: int = 2,
                guard_violation: float = GUARD_VIOLATION, earlier: Mapping[str, float] | None = None,
                lookahead: float = 0.0, untrusted_for: Mapping[str, int] | None = None,
-               patience: int = 0) -> set[str]:
+               patience: int = 0, floors: Mapping[str, float] | None = None) -> set[str]:
     """Names of the live candidates (keys of ``costs``) to prune after round ``iteration``: those
     whose own iterate is trusted and whose cost exceeds the guarded reference by more than
     ``threshold`` (relative).
@@ -87,6 +89,8 @@ def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], conv
     ``c_k - lookahead * (earlier[k] - c_k)`` is within the threshold: still converging towards it.
     With ``patience > 0``, a candidate whose iterates have not been trusted for
     ``untrusted_for[k] >= patience`` iterations is pruned too, once a reference exists.
+    ``floors`` are candidates judged only on a lower bound of their final cost (a re-solve's
+    previous optimum): pruned when the bound exceeds the threshold; they are not references.
     """
     if iteration < start_iteration:
         return set()
@@ -105,6 +109,7 @@ def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], conv
                                     or (c - lookahead * (earlier[k] - c) - reference) / reference <= threshold):
             continue
         chosen.add(k)
+    chosen |= {k for k, b in (floors or {}).items() if (b - reference) / reference > threshold}
     return chosen
 
 
@@ -306,6 +311,8 @@ class PruningManager:
     #: rounds, and how many rounds in a row its iterate has not been trusted.
     trusted: dict[str, deque] = field(default_factory=dict)
     untrusted_for: dict[str, int] = field(default_factory=dict)
+    #: Per candidate re-solving after a failed verification: the cost its previous solve reached.
+    floor: dict[str, float] = field(default_factory=dict)
 
     def rounds(self) -> Iterator[Progress]:
         order = self.executor.names()
@@ -325,7 +332,6 @@ class PruningManager:
                         if value.status == "optimal":
                             converged[name] = value.cost
                     else:
-                        self.last[name] = value
                         self._remember(name, value)
                 alive = [n for n in alive if n not in self.results]
                 pruned = self._prune(alive, converged, round_)
@@ -358,8 +364,9 @@ class PruningManager:
             return []
         # A candidate re-solving with refined sub-steps starts from an optimum that failed
         # verification; its cost jumps while the new sub-step constraints are restored (measured:
-        # 2.13 s -> 11.5 s -> 2.14 s), so it is neither judged nor used as the reference.
+        # 2.13 s -> 11.5 s -> 2.14 s), so it is judged on that optimum and is no reference.
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
+        floors = {n: self.floor[n] for n in alive if n in self.last and self.last[n].refinement > 0}
         costs = {n: self.last[n].cost for n in live}
         violations = {n: self.last[n].constraint_violation for n in live}
         s = self.settings
@@ -368,10 +375,15 @@ class PruningManager:
             earlier = {n: self.trusted[n][0] for n in live
                        if len(self.trusted[n]) == s.window + 1 and self.trusted[n][0] is not None}
         chosen = ratio_rule(costs, violations, converged, round_, s.threshold, s.start_iteration,
-                            self.guard_violation, earlier, s.lookahead, self.untrusted_for, s.patience)
+                            self.guard_violation, earlier, s.lookahead, self.untrusted_for, s.patience,
+                            floors)
         return [n for n in alive if n in chosen]
 
     def _remember(self, name: str, iterate: Iterate) -> None:
+        previous = self.last.get(name)
+        if previous is not None and iterate.refinement > previous.refinement:
+            self.floor[name] = previous.cost
+        self.last[name] = iterate
         ok = iterate.constraint_violation <= self.guard_violation
         self.trusted.setdefault(name, deque(maxlen=self.settings.window + 1)).append(
             iterate.cost if ok else None)

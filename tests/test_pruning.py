@@ -44,13 +44,15 @@ SPEC_CANDIDATE_FIELDS = {"composition", "dof", "status", "iterations", "cost", "
 class Script:
     """A fake candidate: one iterate per entry of ``costs`` (violation from ``violations``, 0 by
     default); when the script runs out it ends with status ``end`` and cost ``final_cost``
-    (default: the last iterate's cost)."""
+    (default: the last iterate's cost). Iterates from index ``refine_from`` on belong to a
+    re-solve with refined sub-steps (``refinement`` 1)."""
 
     name: str
     costs: tuple[float, ...]
     violations: tuple[float, ...] | None = None
     end: str = "optimal"
     final_cost: float | None = None
+    refine_from: int | None = None
 
     def violation(self, i: int) -> float:
         return 0.0 if self.violations is None else self.violations[i]
@@ -77,8 +79,9 @@ class FakeCandidate:
         for i, cost in enumerate(self.script.costs):
             if self.log is not None:
                 self.log.append(("step", self.name, i + 1))
+            refining = self.script.refine_from is not None and i >= self.script.refine_from
             self.last = Iterate(i + 1, float(cost), self.script.violation(i), float(cost),
-                                np.array([cost, self.script.violation(i)]))
+                                np.array([cost, self.script.violation(i)]), refinement=int(refining))
             self.history.append(float(cost))
             yield self.last
         if self.log is not None:
@@ -185,10 +188,17 @@ def expected_outcome(scripts, rule, threshold, start_iteration, guard=GUARD_VIOL
                     converged[name] = s.final_cost if s.final_cost is not None else s.costs[-1]
         alive = [n for n in alive if n not in out]
         if rule == "ratio" and round_ >= start_iteration:
-            now = {n: (by_name[n].costs[round_ - 1], by_name[n].violation(round_ - 1)) for n in alive}
+            def refining(n):
+                return by_name[n].refine_from is not None and round_ > by_name[n].refine_from
+
+            now = {n: (by_name[n].costs[round_ - 1], by_name[n].violation(round_ - 1)) for n in alive
+                   if not refining(n)}
             trusted = [c for c, v in now.values() if v <= guard] + list(converged.values())
             if trusted and min(trusted) > 0:
                 ref = min(trusted)
+                for n in alive:  # a re-solve is judged on the cost its previous solve ended at
+                    if refining(n) and (by_name[n].costs[by_name[n].refine_from - 1] - ref) / ref > threshold:
+                        out[n] = ("pruned", round_, round_)
                 for n, (c, v) in now.items():
                     if v > guard:
                         if patience and untrusted_run(n, round_) >= patience:
@@ -212,7 +222,8 @@ def random_scripts(rng: np.random.Generator, count: int) -> list[Script]:
                                                          p=[0.5, 0.1, 0.2, 0.2]))
         end = str(rng.choice(["optimal", "optimal", "failed"]))
         final = None if rng.random() < 0.5 else float(np.round(rng.uniform(0.5, 3.0), 2))
-        scripts.append(Script(f"c{k}", costs, violations, end, final))
+        refine = int(rng.integers(1, length)) if length > 1 and rng.random() < 0.3 else None
+        scripts.append(Script(f"c{k}", costs, violations, end, final, refine))
     return scripts
 
 
@@ -288,6 +299,25 @@ def test_patience_prunes_a_candidate_that_stays_untrusted():
     assert ratio_rule(costs, {"a": 1.0, "b": 1.0}, {}, 60, untrusted_for={"a": 60, "b": 60}, patience=50) == set()
     assert ratio_rule(costs, {"a": 1.0, "b": 1.0}, {"z": 2.0}, 60, untrusted_for={"a": 60, "b": 60},
                       patience=50) == {"a", "b"}
+
+
+def test_a_refining_candidate_is_judged_on_its_previous_optimum():
+    costs, violations = {"a": 1.0}, {"a": 0.0}
+    assert ratio_rule(costs, violations, {}, 5, floors={"r": 1.6}) == {"r"}
+    assert ratio_rule(costs, violations, {}, 5, floors={"r": 1.5}) == set()
+    # a floor is not a reference: alone it prunes nobody
+    assert ratio_rule({}, {}, {}, 5, floors={"r": 1.0, "s": 9.0}) == set()
+
+
+def test_manager_judges_a_re_solve_on_the_optimum_before_it():
+    """r converges at 1.8 then re-solves (its iterates jump to 9): it is pruned on 1.8 once the
+    reference is below 1.2 (round 4), never on its transients; s re-solves from 1.25 and is kept."""
+    scripts = [Script("a", (1.3, 1.3, 1.25, 1.0, 1.0, 1.0)),
+               Script("r", (1.8, 1.8, 9.0, 9.0, 9.0, 9.0), refine_from=2),
+               Script("s", (1.25, 1.25, 9.0, 9.0, 9.0, 9.0), refine_from=2)]
+    results, _ = run_fakes(scripts)
+    assert results["r"].status == "pruned" and results["r"].pruned_at_iteration == 4  # 1.8 > 1.5 * 1.0
+    assert results["s"].status == "optimal"
 
 
 def test_ratio_rule_without_a_positive_reference_prunes_nobody():
