@@ -27,8 +27,8 @@ Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSe
 * **progress** (``window``, ``lookahead``): a trusted cost can still be far from the
   candidate's optimum. Measured on low-10kg: the brute-force winner is first trusted at 6.7 s
   (iteration 16) and comes within 1 % of its optimum, 1.02 s, only at iteration 209; the bare
-  rule prunes it on a trusted cost at any threshold up to 1.5. So a candidate is judged only when it was already
-  trusted ``window`` iterations ago, and it is kept while the fall of its cost over that window,
+  rule prunes it on a trusted cost at any threshold up to 1.5. So a candidate is judged only
+  when it was already trusted ``window`` iterations ago, and it is kept while the fall of its cost over that window,
   repeated ``lookahead`` more times, would bring it back within the threshold: a candidate far
   above the reference needs a steep fall to be kept, one just above it a gentle one.
 * **patience**: a candidate whose iterates are never trusted is never judged by the ratio, and
@@ -366,7 +366,7 @@ class PruningManager:
         # verification; its cost jumps while the new sub-step constraints are restored (measured:
         # 2.13 s -> 11.5 s -> 2.14 s), so it is judged on that optimum and is no reference.
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
-        floors = {n: self.floor[n] for n in alive if n in self.last and self.last[n].refinement > 0}
+        floors = {n: self.floor[n] for n in alive if n in self.floor and self.last[n].refinement > 0}
         costs = {n: self.last[n].cost for n in live}
         violations = {n: self.last[n].constraint_violation for n in live}
         s = self.settings

@@ -46,19 +46,6 @@ GUESS_TRIALS = 48
 GUESS_CLEARANCE = 0.02
 
 
-#: Fractions of a sub-step where the position limits are also kept.
-POSITION_FRACTIONS = (0.5,)
-
-
-def _hermite_weights(theta: np.ndarray) -> np.ndarray:
-    """Cubic Hermite basis at ``theta``: weights of ``q_j``, ``h v_j``, ``q_{j+1}``, ``h v_{j+1}``."""
-    t = np.asarray(theta, dtype=float)[:, None]
-    return np.hstack([2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, -2 * t**3 + 3 * t**2, t**3 - t**2])
-
-
-_HERMITE = _hermite_weights(np.array(POSITION_FRACTIONS))
-
-
 class NonFiniteError(ModularRobotsError, ArithmeticError):
     """The dynamics produced NaN or infinite values at a trial point."""
 
@@ -260,7 +247,7 @@ class ShootingProblem:
         p = n + nv + 1
         cols = self._cols = np.array([self._interval_columns(m) for m in range(N)])
         pairs = len(self.obstacles) if self.collision else 0
-        blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S * len(POSITION_FRACTIONS), nv),
+        blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S, nv),
                   ("clearance", S, pairs)]
         if not self.transcription.controls_are_torques:
             blocks.append(("torque", S + 1, nv))
@@ -360,20 +347,17 @@ class ShootingProblem:
         return evaluation
 
     def _between_substeps(self, tf: float, prop: Propagation, derivatives: bool):
-        """Configurations ``(N, S, F, nv)`` at the fractions :data:`POSITION_FRACTIONS` of every
-        sub-step (module docstring) and their sensitivities to the interval parameters."""
+        """Every sub-step's midpoint configuration ``(N, S, nv)`` on the cubic Hermite interpolant
+        of its end states (module docstring), and its sensitivities to the interval parameters."""
         N, S, nv = self.intervals, self.substeps, self.nv
         h = tf / (N * S)
         q, v = prop.states[:, :, :nv], prop.states[:, :, nv:]
-        w = _HERMITE  # (F, 4): weights of q_j, h v_j, q_{j+1}, h v_{j+1}
-        ends = (q[:, :S, None], h * v[:, :S, None], q[:, 1:, None], h * v[:, 1:, None])
-        middle = sum(w[:, i, None] * x for i, x in enumerate(ends))
+        middle = 0.5 * (q[:, :S] + q[:, 1:]) + 0.125 * h * (v[:, :S] - v[:, 1:])
         if not derivatives:
             return middle, None
         dq, dv = prop.state_sens[:, :, :nv], prop.state_sens[:, :, nv:]
-        ends = (dq[:, :S, None], h * dv[:, :S, None], dq[:, 1:, None], h * dv[:, 1:, None])
-        sens = sum(w[:, i, None, None] * x for i, x in enumerate(ends))
-        sens[..., -1] += (w[:, 1, None] * v[:, :S, None] + w[:, 3, None] * v[:, 1:, None]) / (N * S)
+        sens = 0.5 * (dq[:, :S] + dq[:, 1:]) + 0.125 * h * (dv[:, :S] - dv[:, 1:])
+        sens[..., -1] += 0.125 * (v[:, :S] - v[:, 1:]) / (N * S)
         return middle, sens
 
     def _clearance(self, qs: np.ndarray, derivatives: bool):

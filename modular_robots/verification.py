@@ -129,11 +129,22 @@ def sample_trajectory(problem: ShootingProblem, y: np.ndarray) -> Trajectory:
     return Trajectory(t, states[:, :nv], states[:, nv:], tau, tool)
 
 
+def _dynamics(problem: ShootingProblem, node: np.ndarray, u: np.ndarray):
+    """``xdot(s, x)`` under the torque the plan applies ``s`` seconds into the interval that
+    starts at ``node`` with control ``u``."""
+    robot, tr, nv = problem.robot, problem.transcription, problem.nv
+
+    def rhs(s, state):
+        tau = tr.torque(robot, node, u, s)
+        return np.concatenate([state[nv:], pin.aba(robot.model, robot.data, state[:nv], state[nv:], tau)])
+
+    return rhs
+
+
 def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
            rtol: float = 1e-10, atol: float = 1e-10) -> Verification:
     """Re-integrate the solution ``y`` of ``problem`` adaptively and measure it (module docstring)."""
     robot, tr = problem.robot, problem.transcription
-    model, data = robot.model, robot.data
     tf, nodes, controls = problem.unpack(y)
     N, S, nv = problem.intervals, problem.substeps, problem.nv
     hs = tf / (N * S)
@@ -145,11 +156,7 @@ def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
     planned = problem.transcription.propagate(robot, nodes[:-1], controls, tf, N, S, False).states
     for m in range(N):
         node, u = nodes[m], controls[m]
-
-        def rhs(s, state, node=node, u=u):
-            tau = tr.torque(robot, node, u, s)
-            return np.concatenate([state[nv:], pin.aba(model, data, state[:nv], state[nv:], tau)])
-
+        rhs = _dynamics(problem, node, u)
         gap = 0.0
         for j in range(S):
             sol = solve_ivp(rhs, (j * hs, (j + 1) * hs), planned[m, j], method="DOP853", rtol=rtol, atol=atol,
@@ -169,8 +176,8 @@ def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
             x = sol.y[:, -1]
             gap += np.abs(x - (planned[m, j + 1] if j < S - 1 else nodes[m + 1])) / problem.x_scale
         defect = max(defect, float(np.max(gap)))
-    # (rhs is the last interval's)
-    last = solve_ivp(rhs, (0.0, S * hs), nodes[N - 1], method="DOP853", rtol=rtol, atol=atol)
+    last = solve_ivp(_dynamics(problem, nodes[N - 1], controls[N - 1]), (0.0, S * hs), nodes[N - 1],
+                     method="DOP853", rtol=rtol, atol=atol)
     x = last.y[:, -1] if last.success else np.full(2 * nv, np.inf)
     error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(problem.q_goal)))
     return Verification(error, float(np.max(np.abs(x[nv:]))), defect, clearance, max(pos_excess, 0.0),
