@@ -59,7 +59,8 @@ class _Replay:
             r, k = self.results[name], self.step[name]
             if k < len(r.cost_history):
                 self.step[name] = k + 1
-                out[name] = Iterate(k + 1, r.cost_history[k], r.violation_history[k], r.cost_history[k], np.empty(0))
+                out[name] = Iterate(k + 1, r.cost_history[k], r.violation_history[k], r.cost_history[k], np.empty(0),
+                                    cost_bound=r.cost_bound)
             else:
                 out[name] = r
         return out

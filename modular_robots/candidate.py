@@ -54,6 +54,8 @@ class CandidateResult:
     substeps: int = 0
     pruned_at_iteration: int | None = None
     y: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: The problem's lower bound on the cost (:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`).
+    cost_bound: float = 0.0
 
     def to_json(self) -> dict:
         return {
@@ -67,6 +69,7 @@ class CandidateResult:
             "tf": _finite(self.tf),
             "constraint_violation": _finite(self.constraint_violation),
             "pruned_at_iteration": self.pruned_at_iteration,
+            "cost_bound": _finite(self.cost_bound),
             "substeps": self.substeps,
             "verification": self.verification.to_json() if self.verification else None,
             "cost_history": [_finite(c) for c in self.cost_history],
@@ -171,7 +174,7 @@ class Candidate:
             self.name, problem.nv, status, reason, last.iteration if last else 0, self._seconds,
             last.cost if last else np.nan, last.tf if last else np.nan,
             last.constraint_violation if last else np.nan, tuple(self.history), tuple(self.violations),
-            verification, problem.substeps, None, last.y if last else None)
+            verification, problem.substeps, None, last.y if last else None, problem.cost_bound)
         self.problem = problem
 
 

@@ -20,7 +20,12 @@ to 3.44 s and back to 1.57 s, and the unguarded rule pruned it at 3.44 s). A can
 converged is never pruned. One that is re-solving after a failed verification is judged on the
 optimum of its previous solve, not on its iterates (they are transients of the refinement): for
 the inverse transcription the refined problem keeps every constraint of the coarse one and adds
-more, so that optimum is a lower bound of what the re-solve can reach.
+more, so that optimum is a lower bound of what the re-solve can reach. And every candidate is
+also judged on a lower bound that holds for any of its iterates, trusted or not: the minimum
+time its busiest joint needs at its velocity limit
+(:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`); a candidate whose bound alone is
+clearly worse than the reference is pruned as soon as there is a reference, before it spends
+iterations on becoming feasible.
 
 Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSettings`:
 
@@ -89,8 +94,10 @@ def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], conv
     ``c_k - lookahead * (earlier[k] - c_k)`` is within the threshold: still converging towards it.
     With ``patience > 0``, a candidate whose iterates have not been trusted for
     ``untrusted_for[k] >= patience`` iterations is pruned too, once a reference exists.
-    ``floors`` are candidates judged only on a lower bound of their final cost (a re-solve's
-    previous optimum): pruned when the bound exceeds the threshold; they are not references.
+    ``floors`` are lower bounds of candidates' final costs (the problem's
+    :attr:`~modular_robots.shooting.ShootingProblem.cost_bound`, or a re-solve's previous optimum):
+    a candidate whose bound exceeds the threshold is pruned whatever its iterate; one absent from
+    ``costs`` is judged on its bound only and is no reference.
     """
     if iteration < start_iteration:
         return set()
@@ -366,7 +373,8 @@ class PruningManager:
         # verification; its cost jumps while the new sub-step constraints are restored (measured:
         # 2.13 s -> 11.5 s -> 2.14 s), so it is judged on that optimum and is no reference.
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
-        floors = {n: self.floor[n] for n in alive if n in self.floor and self.last[n].refinement > 0}
+        floors = {n: max(self.last[n].cost_bound, self.floor[n] if self.last[n].refinement > 0 else 0.0)
+                  for n in alive if n in self.last}
         costs = {n: self.last[n].cost for n in live}
         violations = {n: self.last[n].constraint_violation for n in live}
         s = self.settings

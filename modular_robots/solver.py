@@ -40,7 +40,8 @@ class Iterate:
 
     ``cost`` in its unit (``tf`` [s] for ``time``, ``integral of |tau / tau_max|^2 dt`` [s] for
     ``effort``), ``tf`` [s], ``constraint_violation`` the largest scaled violation (trust-constr's
-    measure), ``y`` the scaled decision vector.
+    measure), ``y`` the scaled decision vector, ``cost_bound`` the problem's lower bound on its
+    cost (:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`).
     """
 
     iteration: int
@@ -51,6 +52,7 @@ class Iterate:
     optimality: float = float("nan")
     #: How many times the sub-steps had been refined (0: the first solve).
     refinement: int = 0
+    cost_bound: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -172,7 +174,8 @@ class ShootingSolver:
         y = np.array(state.x, dtype=float)
         tf = float(y[0] * problem.variable_scale[0])
         iterate = Iterate(self.iteration_offset + int(state.nit), float(state.fun) * problem.cost_unit,
-                          float(state.constr_violation), tf, y, float(state.optimality))
+                          float(state.constr_violation), tf, y, float(state.optimality),
+                          cost_bound=problem.cost_bound)
         self._to_caller.put(iterate)
         self._resume.acquire()
         self._clock = time.perf_counter()
@@ -210,7 +213,7 @@ class ShootingSolver:
             y = np.array(result.x, dtype=float)
             final = Iterate(self.iteration_offset + int(result.nit), float(result.fun) * self.problem.cost_unit,
                             float(result.constr_violation), float(y[0] * self.problem.variable_scale[0]), y,
-                            float(result.optimality))
+                            float(result.optimality), cost_bound=self.problem.cost_bound)
         iterations = final.iteration - self.iteration_offset if final is not None else 0
         self._to_caller.put(SolverOutcome(status, reason, iterations, self._seconds, final))
 

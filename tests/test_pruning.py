@@ -45,7 +45,8 @@ class Script:
     """A fake candidate: one iterate per entry of ``costs`` (violation from ``violations``, 0 by
     default); when the script runs out it ends with status ``end`` and cost ``final_cost``
     (default: the last iterate's cost). Iterates from index ``refine_from`` on belong to a
-    re-solve with refined sub-steps (``refinement`` 1)."""
+    re-solve with refined sub-steps (``refinement`` 1). ``bound`` is the problem's lower bound on
+    the cost, carried by every iterate."""
 
     name: str
     costs: tuple[float, ...]
@@ -53,6 +54,7 @@ class Script:
     end: str = "optimal"
     final_cost: float | None = None
     refine_from: int | None = None
+    bound: float = 0.0
 
     def violation(self, i: int) -> float:
         return 0.0 if self.violations is None else self.violations[i]
@@ -81,7 +83,8 @@ class FakeCandidate:
                 self.log.append(("step", self.name, i + 1))
             refining = self.script.refine_from is not None and i >= self.script.refine_from
             self.last = Iterate(i + 1, float(cost), self.script.violation(i), float(cost),
-                                np.array([cost, self.script.violation(i)]), refinement=int(refining))
+                                np.array([cost, self.script.violation(i)]), refinement=int(refining),
+                                cost_bound=self.script.bound)
             self.history.append(float(cost))
             yield self.last
         if self.log is not None:
@@ -196,8 +199,11 @@ def expected_outcome(scripts, rule, threshold, start_iteration, guard=GUARD_VIOL
             trusted = [c for c, v in now.values() if v <= guard] + list(converged.values())
             if trusted and min(trusted) > 0:
                 ref = min(trusted)
-                for n in alive:  # a re-solve is judged on the cost its previous solve ended at
-                    if refining(n) and (by_name[n].costs[by_name[n].refine_from - 1] - ref) / ref > threshold:
+                for n in alive:  # the cost bound, and a re-solve's previous optimum, bound the final cost
+                    floor = by_name[n].bound
+                    if refining(n):
+                        floor = max(floor, by_name[n].costs[by_name[n].refine_from - 1])
+                    if (floor - ref) / ref > threshold:
                         out[n] = ("pruned", round_, round_)
                 for n, (c, v) in now.items():
                     if v > guard:
@@ -223,7 +229,8 @@ def random_scripts(rng: np.random.Generator, count: int) -> list[Script]:
         end = str(rng.choice(["optimal", "optimal", "failed"]))
         final = None if rng.random() < 0.5 else float(np.round(rng.uniform(0.5, 3.0), 2))
         refine = int(rng.integers(1, length)) if length > 1 and rng.random() < 0.3 else None
-        scripts.append(Script(f"c{k}", costs, violations, end, final, refine))
+        bound = float(np.round(rng.uniform(0.0, 2.0), 2)) if rng.random() < 0.3 else 0.0
+        scripts.append(Script(f"c{k}", costs, violations, end, final, refine, bound))
     return scripts
 
 
@@ -318,6 +325,21 @@ def test_manager_judges_a_re_solve_on_the_optimum_before_it():
     results, _ = run_fakes(scripts)
     assert results["r"].status == "pruned" and results["r"].pruned_at_iteration == 4  # 1.8 > 1.5 * 1.0
     assert results["s"].status == "optimal"
+
+
+def test_manager_prunes_on_the_cost_bound_before_the_candidate_is_trusted():
+    """b's iterates are never trusted, but no plan of its problem is faster than 1.6 s: it is
+    pruned in the first round with a reference (round 2, start_iteration), c (bound 1.5) is not."""
+    scripts = [Script("a", (1.0,) * 5),
+               Script("b", (0.5,) * 5, violations=(1.0,) * 5, bound=1.6),
+               Script("c", (1.2,) * 5, bound=1.5)]
+    results, _ = run_fakes(scripts)
+    assert (results["b"].status, results["b"].pruned_at_iteration) == ("pruned", 2)
+    assert results["c"].status == "optimal"
+    # a bound is not a reference: alone it prunes nobody
+    results, _ = run_fakes([Script("b", (0.5,) * 3, violations=(1.0,) * 3, bound=9.0),
+                            Script("d", (0.4,) * 3, violations=(1.0,) * 3, bound=1.0)])
+    assert {r.status for r in results.values()} == {"optimal"}
 
 
 def test_ratio_rule_without_a_positive_reference_prunes_nobody():

@@ -323,8 +323,11 @@ def test_rotor_reaches_the_analytic_minimum_time(case, transcription):
     assert outcome.status == "optimal", outcome.reason
     tf = outcome.final.tf
     assert tf == pytest.approx(expected, rel=0.01)
-    # nothing within the limits is faster than the analytic optimum
+    # nothing within the limits is faster than the analytic optimum, nor than the problem's
+    # velocity bound (the whole stroke at the velocity limit)
     assert tf >= expected * (1.0 - 1e-4)
+    assert problem.cost_bound == pytest.approx(dq / v_max, rel=1e-12)
+    assert tf >= problem.cost_bound
     if case == "bang-bang-7-intervals":
         assert tf > 1.005 * T_BANG  # the piecewise-constant penalty is real
     check = verify(problem, outcome.final.y)
@@ -410,7 +413,8 @@ def test_ur5_with_payload_solves_and_verifies():
     assert check.position_excess <= 1e-6
     assert check.velocity_ratio <= 1.0 + 1e-3 and check.torque_ratio <= 1.0 + 1e-3
     # no motion within the velocity limits is faster than the slowest joint at full speed
-    assert result.tf >= np.max(np.abs(q_goal - q_start) / robot.velocity_limit)
+    assert result.cost_bound == pytest.approx(np.max(np.abs(q_goal - q_start) / robot.velocity_limit))
+    assert result.tf >= result.cost_bound
 
 
 def test_midpoint_position_rows_are_the_parabola_midpoints(paper):
