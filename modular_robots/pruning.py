@@ -21,11 +21,12 @@ converged is never pruned. One that is re-solving after a failed verification is
 optimum of its previous solve, not on its iterates (they are transients of the refinement): for
 the inverse transcription the refined problem keeps every constraint of the coarse one and adds
 more, so that optimum is a lower bound of what the re-solve can reach. And every candidate is
-also judged on a lower bound that holds for any of its iterates, trusted or not: the minimum
-time its busiest joint needs at its velocity limit
-(:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`); a candidate whose bound alone is
-clearly worse than the reference is pruned as soon as there is a reference, before it spends
-iterations on becoming feasible.
+also judged on a lower bound of its final cost, whether or not its iterates are trusted: the
+minimum time its busiest joint needs at its velocity limit
+(:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`; 0 for the ``effort`` cost). A
+candidate whose bound alone is clearly worse than the reference is pruned from
+``start_iteration`` on, as soon as there is a reference, before it spends iterations on becoming
+feasible.
 
 Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSettings`:
 
@@ -206,7 +207,7 @@ class InProcessExecutor:
 
 def _never_started(name: str) -> CandidateResult:
     nan = float("nan")
-    return CandidateResult(name, 0, "stopped", "stopped before it started", 0, 0.0, nan, nan, nan)
+    return CandidateResult(name, 0, "stopped", "stopped before it started", 0, 0.0, nan, nan, nan, cost_bound=nan)
 
 
 def _worker(conn, factory, context, specs, names) -> None:
@@ -373,7 +374,7 @@ class PruningManager:
         # verification; its cost jumps while the new sub-step constraints are restored (measured:
         # 2.13 s -> 11.5 s -> 2.14 s), so it is judged on that optimum and is no reference.
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
-        floors = {n: max(self.last[n].cost_bound, self.floor[n] if self.last[n].refinement > 0 else 0.0)
+        floors = {n: max(self.last[n].cost_bound, self.floor.get(n, 0.0) if self.last[n].refinement > 0 else 0.0)
                   for n in alive if n in self.last}
         costs = {n: self.last[n].cost for n in live}
         violations = {n: self.last[n].constraint_violation for n in live}

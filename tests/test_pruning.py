@@ -13,7 +13,7 @@ import json
 import multiprocessing
 import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -229,7 +229,11 @@ def random_scripts(rng: np.random.Generator, count: int) -> list[Script]:
         end = str(rng.choice(["optimal", "optimal", "failed"]))
         final = None if rng.random() < 0.5 else float(np.round(rng.uniform(0.5, 3.0), 2))
         refine = int(rng.integers(1, length)) if length > 1 and rng.random() < 0.3 else None
-        bound = float(np.round(rng.uniform(0.0, 2.0), 2)) if rng.random() < 0.3 else 0.0
+        # a bound at most the script's trusted and final costs, as a real problem's (feasible costs
+        # are above it, untrusted ones need not be)
+        lowest = min([c for c, v in zip(costs, violations) if v <= GUARD_VIOLATION]
+                     + [final if final is not None else costs[-1]])
+        bound = float(np.floor(rng.uniform(0.5, 1.0) * lowest * 100) / 100) if rng.random() < 0.3 else 0.0
         scripts.append(Script(f"c{k}", costs, violations, end, final, refine, bound))
     return scripts
 
@@ -467,6 +471,7 @@ def test_candidate_without_iterates():
 
 def test_random_scripts_match_the_rule_statement():
     rng = np.random.default_rng(20240506)
+    decided_by_bounds = 0
     for trial in range(120):
         scripts = random_scripts(rng, int(rng.integers(1, 7)))
         threshold = float(rng.choice([0.2, 0.5, 1.0]))
@@ -481,6 +486,9 @@ def test_random_scripts_match_the_rule_statement():
         for r in results.values():
             assert r.cost_history == by_name(scripts)[r.name].costs[:r.iterations]
         assert sum(len(p.pruned) for p in progress) == sum(r.status == "pruned" for r in results.values())
+        unbounded = [replace(s, bound=0.0) for s in scripts]
+        decided_by_bounds += expected_outcome(unbounded, rule, threshold, start, **guard) != expected
+    assert decided_by_bounds >= 5, decided_by_bounds  # the draws exercise the cost bounds, not only the iterates
 
 
 def by_name(scripts):

@@ -353,6 +353,16 @@ def test_rotor_reaches_the_analytic_minimum_time(case, transcription):
         assert np.all(np.abs(trajectory.tau[cruise, 0]) < 0.05 * TAU_ROTOR)
 
 
+@pytest.mark.parametrize(("v_max", "cost", "expected"), [(2.0, "time", 0.75), (np.inf, "time", 0.0),
+                                                       (2.0, "effort", 0.0)])
+def test_cost_bound_counts_only_velocity_limited_joints_of_the_time_cost(v_max, cost, expected):
+    """1.5 rad at 2 rad/s takes at least 0.75 s; a joint without a velocity limit bounds nothing,
+    and neither does the effort cost."""
+    problem = ShootingProblem(rotor(I_ROTOR, TAU_ROTOR, v_max), [-0.5], [1.0], cost=cost,
+                              settings=OptimizerSettings(nodes=3, substeps=1))
+    assert problem.cost_bound == expected
+
+
 # --------------------------------------------------------------------------------------------
 # 3. an obstacle across the straight line
 # --------------------------------------------------------------------------------------------
