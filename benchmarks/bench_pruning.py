@@ -36,8 +36,9 @@ def _summary(result) -> dict:
 
 
 THRESHOLDS = (0.5, 1.0, 1.5, 2.0)
-#: The guard's progress window and patience off (the bare rule) and at the defaults.
-GUARDS = {"bare": {"window": 0, "patience": 0}, "default": {}}
+#: The guard's progress window and patience off (the bare rule) and at the defaults; and the
+#: defaults without the candidates' cost bounds (what the bound adds).
+GUARDS = {"bare": {"window": 0, "patience": 0}, "default": {}, "default, no cost bound": {}}
 
 
 class _Replay:
@@ -46,8 +47,8 @@ class _Replay:
     threshold without solving again (refinement phases are not marked in the histories, so they
     are judged like first solves: slightly more pruning than a live run)."""
 
-    def __init__(self, results):
-        self.results = {r.name: r for r in results}
+    def __init__(self, results, bounds: bool = True):
+        self.results = {r.name: r if bounds else replace(r, cost_bound=0.0) for r in results}
         self.step = {r.name: 0 for r in results}
 
     def names(self):
@@ -72,16 +73,30 @@ class _Replay:
         pass
 
 
+def hindsight(brute, threshold: float, start_iteration: int) -> dict:
+    """The fewest iterations of a rule that never prunes a candidate ending within ``threshold``
+    of the winner: with hindsight, every other candidate is pruned at ``start_iteration`` and
+    these run to their end."""
+    total = sum(len(r.cost_history) for r in brute.candidates)
+    best = brute.winner.cost
+    kept = [r for r in brute.candidates if r.status == "optimal" and r.cost <= (1.0 + threshold) * best]
+    used = sum(len(r.cost_history) for r in kept) + sum(
+        min(start_iteration, len(r.cost_history)) for r in brute.candidates if r not in kept)
+    return {"guard": "hindsight", "threshold": threshold, "iterations": used, "saving_x": total / used,
+            "same_winner": True, "pruned": len(brute.candidates) - len(kept)}
+
+
 def replay(brute, scenario) -> list[dict]:
     """The ratio rule at several thresholds, bare and with the default guard, replayed on the
-    brute-force histories."""
+    brute-force histories; and the hindsight floor of a rule that keeps every candidate ending
+    within the threshold."""
     truth = brute.winner.name
     total = sum(len(r.cost_history) for r in brute.candidates)
-    rows = []
+    rows = [hindsight(brute, threshold, scenario.pruning.start_iteration) for threshold in THRESHOLDS]
     for guard, overrides in GUARDS.items():
         for threshold in THRESHOLDS:
             settings = replace(scenario.pruning, rule="ratio", threshold=threshold, **overrides)
-            results = PruningManager(_Replay(brute.candidates), settings).run()
+            results = PruningManager(_Replay(brute.candidates, "no cost bound" not in guard), settings).run()
             used = sum(r.iterations if r.status != "pruned" else r.pruned_at_iteration for r in results)
             optimal = [r for r in results if r.status == "optimal"]
             winner = min(optimal, key=lambda r: (r.cost, r.name)).name

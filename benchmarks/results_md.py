@@ -89,7 +89,10 @@ def build() -> str:
                          f"{r['wall_ratio_s']:.1f} / {r['wall_none_s']:.1f} | {r['wall_saving_x']:.2f}x | "
                          f"{r['pruned']} |")
         lines += ["", "The ratio rule at other thresholds, bare (no progress window, no patience) and with the "
-                  "default guard, replayed on each scenario's brute-force histories (same manager, no re-solve):",
+                  "default guard (with and without the candidates' cost bounds), replayed on each scenario's "
+                  "brute-force histories (same manager, no re-solve); "
+                  "`hindsight` is the floor of any rule that never prunes a candidate ending within the "
+                  "threshold of the winner (the others pruned at `start_iteration`):",
                   "", "| scenario | guard | threshold | iterations | saving | same winner | pruned |",
                   "|---|---|---|---|---|---|---|"]
         for name, d in pruning.get("details", {}).items():
