@@ -98,11 +98,18 @@ class Candidate:
         How many times the sub-steps may be doubled after a failed verification.
     jacobian
         ``exact`` or ``finite-difference`` (see :class:`~modular_robots.solver.ShootingSolver`).
+    restart
+        When a solve stops at the iteration limit, solve once more from where it stopped, with a
+        fresh solver. Near some optima the SR1 approximation degenerates and trust-constr crawls
+        (one conjugate-gradient step per iteration, ended by negative curvature or the trust
+        region); measured on two paper-5kg candidates stopped at 300 iterations while feasible, a
+        restart converged in 30 and 73 iterations.
     """
 
     def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 2,
-                 jacobian: str = "exact"):
+                 jacobian: str = "exact", restart: bool = True):
         self.problem = problem
+        self.restart = restart
         self.name = name or problem.robot.name
         self.max_refinements = max_refinements
         self.jacobian = jacobian
@@ -137,23 +144,29 @@ class Candidate:
         if self.result is None:
             self._finish("stopped", "closed before convergence", self.problem, None)
 
+    def _solve(self, problem: ShootingProblem, y0, offset: int, attempt: int):
+        """One solver run, its iterates yielded; returns its outcome."""
+        solver = ShootingSolver(problem, y0, jacobian=self.jacobian, iteration_offset=offset)
+        try:
+            for it in solver.iterate():
+                it = replace(it, refinement=attempt)
+                self.last = it
+                self.history.append(it.cost)
+                self.violations.append(it.constraint_violation)
+                yield it
+        finally:
+            solver.close()
+            self._seconds += solver.outcome.seconds if solver.outcome else 0.0
+        if solver.outcome.final is not None:
+            self.last = replace(solver.outcome.final, refinement=attempt)
+        return solver.outcome
+
     def _run(self) -> Iterator[Iterate]:
         problem, y0, offset = self.problem, None, 0
         for attempt in range(self.max_refinements + 1):
-            solver = ShootingSolver(problem, y0, jacobian=self.jacobian, iteration_offset=offset)
-            try:
-                for it in solver.iterate():
-                    it = replace(it, refinement=attempt)
-                    self.last = it
-                    self.history.append(it.cost)
-                    self.violations.append(it.constraint_violation)
-                    yield it
-            finally:
-                solver.close()
-                self._seconds += solver.outcome.seconds if solver.outcome else 0.0
-            outcome = solver.outcome
-            if outcome.final is not None:
-                self.last = outcome.final
+            outcome = yield from self._solve(problem, y0, offset, attempt)
+            if outcome.limit_reached and self.restart and outcome.final is not None:
+                outcome = yield from self._solve(problem, outcome.final.y, outcome.final.iteration, attempt)
             if outcome.status != "optimal":
                 self._finish(outcome.status, outcome.reason, problem, None)
                 return

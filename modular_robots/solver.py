@@ -58,13 +58,15 @@ class Iterate:
 @dataclass(frozen=True)
 class SolverOutcome:
     """How a solve ended: ``status`` (one of :data:`STATUSES`), a human ``reason``, the number of
-    iterations, the seconds spent inside the solver and the last iterate (None if none)."""
+    iterations, the seconds spent inside the solver, the last iterate (None if none) and whether
+    it stopped at the iteration limit."""
 
     status: str
     reason: str
     iterations: int
     seconds: float
     final: Iterate | None
+    limit_reached: bool = False
 
     @property
     def converged(self) -> bool:
@@ -204,14 +206,14 @@ class ShootingSolver:
             self._finish("failed", "non-finite decision variables", result)
         elif result.status == 0:
             self._finish("failed", f"iteration limit ({self.max_iterations}) reached, constraint "
-                                   f"violation {violation:.2g}", result)
+                                   f"violation {violation:.2g}", result, limit_reached=True)
         elif violation > self.constraint_tolerance:
             self._finish("failed", f"infeasible: the solver stopped ({result.message}) with constraint "
                                    f"violation {violation:.2g}", result)
         else:
             self._finish("optimal", str(result.message), result)
 
-    def _finish(self, status: str, reason: str, result=None) -> None:
+    def _finish(self, status: str, reason: str, result=None, limit_reached: bool = False) -> None:
         self._seconds += time.perf_counter() - self._clock
         final = self.last
         if result is not None and (final is None or final.iteration != self.iteration_offset + result.nit):
@@ -220,7 +222,7 @@ class ShootingSolver:
                             float(result.constr_violation), float(y[0] * self.problem.variable_scale[0]), y,
                             float(result.optimality), cost_bound=self.problem.cost_bound)
         iterations = final.iteration - self.iteration_offset if final is not None else 0
-        self._to_caller.put(SolverOutcome(status, reason, iterations, self._seconds, final))
+        self._to_caller.put(SolverOutcome(status, reason, iterations, self._seconds, final, limit_reached))
 
     def _minimize(self):
         problem = self.problem
