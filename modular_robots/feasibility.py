@@ -282,9 +282,8 @@ def _boundary_pair(robot: RobotModel, starts, goals) -> tuple[np.ndarray, np.nda
     Joint limits of the paper catalogue do not allow wrapping through +-pi, so the shortest
     way within limits is the plain difference.
     """
-    velocity = robot.velocity_limit
-    best = min(itertools.product(starts, goals), key=lambda pair: float(np.max(np.abs(pair[1] - pair[0]) / velocity)))
-    return best[0], best[1], float(np.max(np.abs(best[1] - best[0]) / velocity))
+    best = min(itertools.product(starts, goals), key=lambda pair: robot.travel_time_bound(*pair))
+    return best[0], best[1], robot.travel_time_bound(*best)
 
 
 # -- many compositions -------------------------------------------------------------------------

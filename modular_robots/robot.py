@@ -100,6 +100,15 @@ class RobotModel:
         """Symmetric velocity bounds [rad/s or m/s]."""
         return self.model.velocityLimit.copy()
 
+    def travel_time_bound(self, q_a: np.ndarray, q_b: np.ndarray) -> float:
+        """No motion from rest at ``q_a`` to ``q_b`` within the velocity limits takes less than
+        ``max_i |q_b,i - q_a,i| / qdot_max,i`` [s] (joints without a finite positive limit
+        bound nothing)."""
+        velocity = self.velocity_limit
+        limited = np.isfinite(velocity) & (velocity > 0)
+        moves = np.abs(np.asarray(q_b, dtype=float) - np.asarray(q_a, dtype=float))
+        return float(np.max(moves[limited] / velocity[limited], initial=0.0))
+
     @property
     def effort_limit(self) -> np.ndarray:
         """Symmetric torque/force bounds [N m or N]."""
