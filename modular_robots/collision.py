@@ -16,7 +16,14 @@ import pinocchio as pin
 
 from .robot import RobotModel
 
-__all__ = ["SphereObstacle", "CollisionModel", "Distances"]
+__all__ = ["SphereObstacle", "CollisionModel", "Distances", "PATH_CLEARANCE"]
+
+#: Clearance a joint-space path must keep from every obstacle to count as clear [m] (step B's
+#: boundary pair, step C's initial guess).
+PATH_CLEARANCE = 0.02
+#: Below this distance between two sphere centres [m], python-fcl 0.7's signed distance query
+#: does not return (measured: 1e-4 m hangs, 1e-3 m answers), so the distance is computed here.
+CONCENTRIC = 1e-3
 
 
 @dataclass(frozen=True)
@@ -83,10 +90,23 @@ class CollisionModel:
         dist = np.empty(shape)
         on_robot = np.empty(shape + (3,))
         on_obstacle = np.empty(shape + (3,))
-        for i, robot_obj in enumerate(self._robot_objects):
-            for j, obstacle_obj in enumerate(self._obstacle_objects):
-                dist[i, j], on_robot[i, j], on_obstacle[i, j] = _distance(robot_obj, obstacle_obj)
+        mid = 0.5 * (a + b)
+        for i in range(len(self._robot_objects)):
+            for j in range(len(self._obstacle_objects)):
+                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i])
         return Distances(dist, on_robot, on_obstacle)
+
+    def _pair_distance(self, i: int, j: int, center: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """Signed distance and witness points of placed primitive ``i`` (centred at ``center``) and
+        obstacle ``j``: FCL's, except for nearly concentric spheres (see :data:`CONCENTRIC`)."""
+        if self._prim_lengths[i] == 0.0:
+            gap = center - self._centers[j]
+            norm = math.sqrt(gap @ gap)
+            if norm < CONCENTRIC:
+                u = gap / norm if norm > 0.0 else np.array([0.0, 0.0, 1.0])
+                return (norm - self._prim_radii[i] - self._radii[j], center - self._prim_radii[i] * u,
+                        self._centers[j] + self._radii[j] * u)
+        return _distance(self._robot_objects[i], self._obstacle_objects[j])
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
@@ -114,13 +134,13 @@ class CollisionModel:
         n_obs = len(self.obstacles)
         dist = np.empty(n_obs)
         grad = np.zeros((n_obs, self.robot.nv)) if derivatives else None
-        for j, obstacle_obj in enumerate(self._obstacle_objects):
+        for j in range(n_obs):
             best = (np.inf, -1, None, None)
             for i in np.flatnonzero(lower[:, j] <= upper[j] + 1e-12):
                 if not placed[i]:
                     self._place_one(i, rot, a, b)
                     placed[i] = True
-                d, on_robot, on_obstacle = _distance(self._robot_objects[i], obstacle_obj)
+                d, on_robot, on_obstacle = self._pair_distance(i, j, mid[i])
                 if d < best[0]:
                     best = (d, i, on_robot, on_obstacle)
             dist[j], i, on_robot, on_obstacle = best
@@ -138,6 +158,18 @@ class CollisionModel:
     def min_distance(self, q: np.ndarray) -> float:
         """Smallest signed distance between the robot and any obstacle [m] (inf: no obstacle)."""
         return self.distances(q).minimum
+
+    def path_clear(self, path: np.ndarray, clearance: float = PATH_CLEARANCE, samples: int = 24) -> bool:
+        """True if the joint-space polyline ``path`` ``(K, nv)``, sampled ``samples`` times per
+        segment, keeps ``clearance`` [m] from every obstacle (stops at the first sample that does not)."""
+        path = np.asarray(path, dtype=float)
+        if not self.obstacles:
+            return True
+        for a, b in zip(path[:-1], path[1:]):
+            for s in np.linspace(0.0, 1.0, samples + 1):
+                if self.closest(a + s * (b - a))[0].min() < clearance:
+                    return False
+        return True
 
     def in_collision(self, q: np.ndarray) -> bool:
         """True if any primitive touches or overlaps any obstacle."""

@@ -49,8 +49,6 @@ __all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
 
 #: Random via configurations tried when the straight-line guess hits an obstacle.
 GUESS_TRIALS = 48
-#: Clearance the initial guess keeps from every obstacle [m].
-GUESS_CLEARANCE = 0.02
 
 
 class NonFiniteError(ModularRobotsError, ArithmeticError):
@@ -191,7 +189,7 @@ class ShootingProblem:
         random via configuration (a guess through an obstacle lets the solver settle on a motion
         that jumps through it between two sub-steps; a clear guess starts on the right side)."""
         straight = np.array([self.q_start, self.q_goal])
-        if self.collision is None or self._path_clear(straight):
+        if self.collision is None or self.collision.path_clear(straight):
             return straight
         rng = np.random.default_rng(0)
         lo = np.where(np.isfinite(self.robot.lower), self.robot.lower, -np.pi)
@@ -200,20 +198,13 @@ class ShootingProblem:
         for _ in range(GUESS_TRIALS):
             path = np.array([self.q_start, rng.uniform(lo, hi), self.q_goal])
             duration = self._path_time(path).sum()
-            if duration < best_time and self._path_clear(path):
+            if duration < best_time and self.collision.path_clear(path):
                 best_time, best = duration, path
         return best
 
     def _path_time(self, path: np.ndarray) -> np.ndarray:
         vmax = positive_or_one(self.robot.velocity_limit)
         return np.max(np.abs(np.diff(path, axis=0)) / vmax, axis=1)
-
-    def _path_clear(self, path: np.ndarray, samples: int = 24) -> bool:
-        for a, b in zip(path[:-1], path[1:]):
-            for s in np.linspace(0.0, 1.0, samples + 1):
-                if self.collision.closest(a + s * (b - a))[0].min() < GUESS_CLEARANCE:
-                    return False
-        return True
 
     def _initial_motion(self):
         """``tf``, node states and node accelerations of the initial guess: the waypoint path

@@ -121,3 +121,32 @@ def test_min_distance_and_collision_flag(paper_catalog):
     assert clear.min_distance(np.zeros(2)) == pytest.approx(0.7)
     assert not clear.in_collision(np.zeros(2)) and hit.in_collision(np.zeros(2))
     assert CollisionModel(robot, []).min_distance(np.zeros(2)) == math.inf
+
+
+def test_path_clear_samples_every_segment(paper_catalog):
+    """The base joint swings the tool through a sphere placed where it is half-way: both ends are
+    clear, the middle is not, and a path that only looks at the ends cannot see it."""
+    robot = robot_model(Composition.from_name("B-J1-L1-J1-L2-E1", paper_catalog), paper_catalog, 0.0)
+    tool = robot.tool_position(np.array([0.0, 1.0, 0.0]))
+    assert np.hypot(tool[0], tool[1]) > 1.0
+    model = CollisionModel(robot, [SphereObstacle(tuple(tool), 0.1)])
+    swing = np.array([[-math.pi / 2, 1.0, 0.0], [math.pi / 2, 1.0, 0.0]])
+    assert model.min_distance(swing[0]) > 0.1 and model.min_distance(swing[1]) > 0.1
+    assert not model.path_clear(swing)
+    assert model.path_clear(swing, samples=1)
+    assert model.path_clear(swing[:1].repeat(2, axis=0), clearance=0.1)
+    assert not model.path_clear(swing[:1].repeat(2, axis=0), clearance=model.min_distance(swing[0]) + 1e-9)
+
+
+@pytest.mark.parametrize("offset", [0.0, 5e-4, 2e-3])
+def test_an_obstacle_concentric_with_the_payload(paper_catalog, offset):
+    """python-fcl's signed sphere-sphere query does not return for centres within 1e-4 m of each
+    other. The end effector's port sphere (radius 0.1 m) and the payload (0.05 m) are centred at
+    the tool point, so the distance is the port's, |c_a - c_b| - 0.1 - 0.1, from both queries."""
+    robot = robot_model(Composition.from_name("B-J1-L1-J1-L2-E1", paper_catalog), paper_catalog, 5.0)
+    q = np.array([0.0, 1.0, 0.0])
+    center = robot.tool_position(q) + np.array([offset, 0.0, 0.0])
+    model = CollisionModel(robot, [SphereObstacle(tuple(center), 0.1)])
+    expected = offset - 0.1 - 0.1
+    assert model.closest(q)[0][0] == pytest.approx(expected, abs=1e-6)
+    assert model.min_distance(q) == pytest.approx(expected, abs=1e-6)
