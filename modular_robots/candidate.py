@@ -95,7 +95,11 @@ class Candidate:
     name
         Shown in results (default: the robot's name).
     max_refinements
-        How many times the sub-steps may be doubled after a failed verification.
+        How many times the sub-steps may be doubled after a failed verification. Refinement
+        removes sampling errors (what a limit or the clearance does between sub-steps shrinks with
+        the sub-step squared); a clearance deficit that one refinement did not halve is a link
+        crossing an obstacle between two clear sub-steps, which no refinement removes (measured on
+        paper-5kg: -0.12 m at 4, 8 and 16 sub-steps), so refinement stops there.
     jacobian
         ``exact`` or ``finite-difference`` (see :class:`~modular_robots.solver.ShootingSolver`).
     restart
@@ -106,7 +110,7 @@ class Candidate:
         restart converged in 30 and 73 iterations.
     """
 
-    def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 2,
+    def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 3,
                  jacobian: str = "exact", restart: bool = True):
         self.problem = problem
         self.restart = restart
@@ -162,7 +166,7 @@ class Candidate:
         return solver.outcome
 
     def _run(self) -> Iterator[Iterate]:
-        problem, y0, offset = self.problem, None, 0
+        problem, y0, offset, verification = self.problem, None, 0, None
         for attempt in range(self.max_refinements + 1):
             outcome = yield from self._solve(problem, y0, offset, attempt)
             if outcome.limit_reached and self.restart and outcome.final is not None:
@@ -171,12 +175,12 @@ class Candidate:
                 self._finish(outcome.status, outcome.reason, problem, None)
                 return
             start = time.perf_counter()
-            verification = verify(problem, outcome.final.y)
+            previous, verification = verification, verify(problem, outcome.final.y)
             self._seconds += time.perf_counter() - start
             if verification.passed:
                 self._finish("optimal", outcome.reason, problem, verification)
                 return
-            if attempt == self.max_refinements:
+            if attempt == self.max_refinements or _crossing(previous, verification):
                 break
             problem, y0, offset = problem.refined(2 * problem.substeps), outcome.final.y, outcome.final.iteration
         self._finish("failed", _verification_failure(verification), problem, verification)
@@ -189,6 +193,13 @@ class Candidate:
             last.constraint_violation if last else np.nan, tuple(self.history), tuple(self.violations),
             verification, problem.substeps, None, last.y if last else None, problem.cost_bound)
         self.problem = problem
+
+
+def _crossing(previous: Verification | None, v: Verification) -> bool:
+    """True if a refinement left more than half the clearance deficit (see ``max_refinements``): a
+    sampling error shrinks to about a quarter when the sub-steps are halved."""
+    return (previous is not None and not previous.clearance_ok and not v.clearance_ok
+            and v.min_clearance <= 0.5 * previous.min_clearance)
 
 
 def _verification_failure(v: Verification) -> str:

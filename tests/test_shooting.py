@@ -27,7 +27,7 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from modular_robots.candidate import Candidate, composition_problem
+from modular_robots.candidate import Candidate, _crossing, composition_problem
 from modular_robots.collision import SphereObstacle
 from modular_robots.composition import Composition
 from modular_robots.feasibility import check_composition
@@ -35,7 +35,7 @@ from modular_robots.robot import Primitive, RobotModel
 from modular_robots.scenario import OptimizerSettings, load_scenario
 from modular_robots.shooting import NonFiniteError, ShootingProblem
 from modular_robots.solver import ShootingSolver
-from modular_robots.verification import sample_trajectory, verify
+from modular_robots.verification import Verification, sample_trajectory, verify
 
 from .conftest import PAPER_5KG
 
@@ -567,6 +567,20 @@ def test_evaluation_error_fails_with_its_reason():
 # --------------------------------------------------------------------------------------------
 # 6. refinement of the RK4 sub-steps
 # --------------------------------------------------------------------------------------------
+def test_refinement_stops_when_a_clearance_deficit_does_not_shrink():
+    """A sampling error shrinks with the sub-step; a link crossing an obstacle between two clear
+    sub-steps stays as deep, and refining it again only costs time."""
+    def checked(clearance):
+        return Verification(0.0, 0.0, 0.0, clearance, 0.0, 1.0, 1.0, 100, 4)
+
+    assert not _crossing(None, checked(-0.12))
+    assert _crossing(checked(-0.12), checked(-0.1213))
+    assert _crossing(checked(-0.16505), checked(-0.1649))
+    assert not _crossing(checked(-0.01), checked(-0.003))
+    assert not _crossing(checked(0.02), checked(-0.01))
+    assert not _crossing(checked(-0.12), checked(0.01))
+
+
 def test_refinement_doubles_substeps_until_the_motion_verifies():
     """Forward transcription, one RK4 step per interval on the two-link arm: the coarse optimum
     exploits RK4's error (the true motion misses the goal / overspeeds), refinement fixes it."""
