@@ -91,22 +91,21 @@ class CollisionModel:
         on_robot = np.empty(shape + (3,))
         on_obstacle = np.empty(shape + (3,))
         mid = 0.5 * (a + b)
+        to_mid = np.linalg.norm(self._centers[None, :, :] - mid[:, None, :], axis=2)
         for i in range(len(self._robot_objects)):
             for j in range(len(self._obstacle_objects)):
-                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i])
+                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], to_mid[i, j])
         return Distances(dist, on_robot, on_obstacle)
 
-    def _pair_distance(self, i: int, j: int, center: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        """Signed distance and witness points of placed primitive ``i`` (centred at ``center``) and
-        obstacle ``j``: FCL's, except for nearly concentric spheres (see :data:`CONCENTRIC`)."""
-        if self._prim_lengths[i] == 0.0:
-            gap = center - self._centers[j]
-            norm = math.sqrt(gap @ gap)
-            if norm < CONCENTRIC:
-                u = gap / norm if norm > 0.0 else np.array([0.0, 0.0, 1.0])
-                return (norm - self._prim_radii[i] - self._radii[j], center - self._prim_radii[i] * u,
-                        self._centers[j] + self._radii[j] * u)
-        return _distance(self._robot_objects[i], self._obstacle_objects[j])
+    def _pair_distance(self, i: int, j: int, center: np.ndarray, apart: float) -> tuple[float, np.ndarray, np.ndarray]:
+        """Signed distance and witness points of placed primitive ``i`` (centred at ``center``,
+        ``apart`` [m] from the obstacle's centre) and obstacle ``j``: FCL's, except for nearly
+        concentric spheres (see :data:`CONCENTRIC`)."""
+        if apart >= CONCENTRIC or self._prim_lengths[i] > 0.0:
+            return _distance(self._robot_objects[i], self._obstacle_objects[j])
+        u = (center - self._centers[j]) / apart if apart > 0.0 else np.array([0.0, 0.0, 1.0])
+        return (apart - self._prim_radii[i] - self._radii[j], center - self._prim_radii[i] * u,
+                self._centers[j] + self._radii[j] * u)
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
@@ -140,7 +139,7 @@ class CollisionModel:
                 if not placed[i]:
                     self._place_one(i, rot, a, b)
                     placed[i] = True
-                d, on_robot, on_obstacle = self._pair_distance(i, j, mid[i])
+                d, on_robot, on_obstacle = self._pair_distance(i, j, mid[i], to_mid[i, j])
                 if d < best[0]:
                     best = (d, i, on_robot, on_obstacle)
             dist[j], i, on_robot, on_obstacle = best
