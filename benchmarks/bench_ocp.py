@@ -13,7 +13,7 @@ import numpy as np
 import pinocchio as pin
 
 from modular_robots import load_scenario
-from modular_robots.candidate import composition_candidate
+from modular_robots.candidate import Candidate, composition_problem
 from modular_robots.execution import ProcessEngine, available_cores
 from modular_robots.feasibility import filter_compositions
 from modular_robots.robot import RobotModel
@@ -31,9 +31,9 @@ REPEATS = 3
 
 def _solve(scenario, verdict, transcription):
     settings = replace(scenario.optimizer, transcription=transcription)
-    candidate = composition_candidate(verdict.composition, scenario.catalog, scenario.task, settings, verdict)
+    problem = composition_problem(verdict.composition, scenario.catalog, scenario.task, settings, verdict)
     start = time.perf_counter()
-    result = candidate.solve()
+    result = Candidate(problem, verdict.composition.name).solve()
     return result, time.perf_counter() - start
 
 

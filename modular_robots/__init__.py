@@ -40,7 +40,7 @@ from .exceptions import (
     ModularRobotsError,
     ScenarioError,
 )
-from .candidate import Candidate, CandidateResult, composition_candidate, composition_problem
+from .candidate import Candidate, CandidateResult, composition_problem
 from .pipeline import RunResult, run_scenario
 from .pruning import InProcessExecutor, ProcessExecutor, PruningManager, ratio_rule
 from .robot import Primitive, RobotModel, robot_model
@@ -66,7 +66,6 @@ __all__ = [
     "SolverOutcome",
     "Trajectory",
     "Verification",
-    "composition_candidate",
     "composition_problem",
     "ratio_rule",
     "run_scenario",

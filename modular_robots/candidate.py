@@ -25,7 +25,7 @@ from .shooting import ShootingProblem
 from .solver import Iterate, ShootingSolver
 from .verification import Verification, verify
 
-__all__ = ["Candidate", "CandidateResult", "composition_problem", "composition_candidate"]
+__all__ = ["Candidate", "CandidateResult", "composition_problem"]
 
 
 @dataclass(frozen=True)
@@ -108,15 +108,11 @@ class Candidate:
         (one conjugate-gradient step per iteration, ended by negative curvature or the trust
         region); measured on two paper-5kg candidates stopped at 300 iterations while feasible, a
         restart converged in 30 and 73 iterations.
-    fallback
-        The same task from other boundary configurations, solved from scratch if ``problem``
-        ends with a link crossing an obstacle (step B's ``clear_pair``).
     """
 
     def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 3,
-                 jacobian: str = "exact", restart: bool = True, fallback: ShootingProblem | None = None):
+                 jacobian: str = "exact", restart: bool = True):
         self.problem = problem
-        self.fallback = fallback
         self.restart = restart
         self.name = name or problem.robot.name
         self.max_refinements = max_refinements
@@ -170,29 +166,24 @@ class Candidate:
         return solver.outcome
 
     def _run(self) -> Iterator[Iterate]:
-        ending = yield from self._refine(self.problem)
-        if self.fallback is not None and ending[3] is not None and not ending[3].clearance_ok:
-            ending = yield from self._refine(self.fallback)
-        self._finish(*ending)
-
-    def _refine(self, problem: ShootingProblem):
-        """Solve, verify and refine ``problem``; returns ``(status, reason, problem, verification)``."""
-        y0, offset, verification = None, self.last.iteration if self.last else 0, None
+        problem, y0, offset, verification = self.problem, None, 0, None
         for attempt in range(self.max_refinements + 1):
             outcome = yield from self._solve(problem, y0, offset, attempt)
             if outcome.limit_reached and self.restart and outcome.final is not None:
                 outcome = yield from self._solve(problem, outcome.final.y, outcome.final.iteration, attempt)
             if outcome.status != "optimal":
-                return outcome.status, outcome.reason, problem, None
+                self._finish(outcome.status, outcome.reason, problem, None)
+                return
             start = time.perf_counter()
             previous, verification = verification, verify(problem, outcome.final.y)
             self._seconds += time.perf_counter() - start
             if verification.passed:
-                return "optimal", outcome.reason, problem, verification
+                self._finish("optimal", outcome.reason, problem, verification)
+                return
             if attempt == self.max_refinements or _crossing(previous, verification):
                 break
             problem, y0, offset = problem.refined(2 * problem.substeps), outcome.final.y, outcome.final.iteration
-        return "failed", _verification_failure(verification), problem, verification
+        self._finish("failed", _verification_failure(verification), problem, verification)
 
     def _finish(self, status: str, reason: str, problem: ShootingProblem, verification: Verification | None):
         last = self.last
@@ -227,11 +218,9 @@ def _verification_failure(v: Verification) -> str:
 
 def composition_problem(composition: Composition, catalog: Catalog, task: Task,
                         settings: OptimizerSettings = OptimizerSettings(), verdict: Verdict | None = None,
-                        feasibility: FeasibilitySettings = FeasibilitySettings(),
-                        clear_pair: bool = False) -> ShootingProblem:
+                        feasibility: FeasibilitySettings = FeasibilitySettings()) -> ShootingProblem:
     """The shooting problem of ``composition`` for ``task``; its boundary configurations come from
-    step B's verdict (computed here if not given): its fastest pair, or with ``clear_pair`` its
-    fastest pair whose straight line clears the obstacles.
+    step B's verdict (computed here if not given).
 
     Raises
     ------
@@ -243,24 +232,4 @@ def composition_problem(composition: Composition, catalog: Catalog, task: Task,
     if not verdict.passed:
         raise InfeasibleError(f"{composition.name} cannot do the task: {verdict.message}")
     robot = robot_model(composition, catalog, task.payload)
-    q_start, q_goal = verdict.clear_pair if clear_pair else (verdict.q_start, verdict.q_goal)
-    return ShootingProblem(robot, q_start, q_goal, task.obstacles, task.cost, settings)
-
-
-def composition_candidate(composition: Composition, catalog: Catalog, task: Task,
-                          settings: OptimizerSettings = OptimizerSettings(), verdict: Verdict | None = None,
-                          feasibility: FeasibilitySettings = FeasibilitySettings()) -> Candidate:
-    """The step-C candidate of ``composition``: its :func:`composition_problem`, with the problem
-    from step B's clear pair as the fallback when there is one.
-
-    Raises
-    ------
-    InfeasibleError
-        If the composition is not feasible for the task.
-    """
-    if verdict is None:
-        verdict = check_composition(composition, catalog, task, feasibility)
-    problem = composition_problem(composition, catalog, task, settings, verdict)
-    fallback = (composition_problem(composition, catalog, task, settings, verdict, clear_pair=True)
-                if verdict.clear_pair else None)
-    return Candidate(problem, composition.name, fallback=fallback)
+    return ShootingProblem(robot, verdict.q_start, verdict.q_goal, task.obstacles, task.cost, settings)

@@ -15,7 +15,7 @@ from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import ModularRobotsError
 from .execution import make_engine
 from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, filter_compositions
-from .candidate import composition_candidate
+from .candidate import Candidate, composition_problem
 from .feasibility import check_composition
 from .report import RESULT, ResultsFolder, result_document, settings_json, winner_json
 from .pipeline import run_scenario, with_pruning
@@ -140,7 +140,8 @@ def optimize_command(composition: str, scenario_path: Path, out: Path, transcrip
     start = time.perf_counter()
     verdict = check_composition(chain, scenario.catalog, scenario.task)
     feasibility_seconds = time.perf_counter() - start
-    candidate = composition_candidate(chain, scenario.catalog, scenario.task, scenario.optimizer, verdict)
+    problem = composition_problem(chain, scenario.catalog, scenario.task, scenario.optimizer, verdict)
+    candidate = Candidate(problem, chain.name)
     folder = ResultsFolder(out)
     counts = {"enumerated": 1, "feasible": 1, "optimized": 1, "pruned": 0}
 

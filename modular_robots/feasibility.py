@@ -94,9 +94,7 @@ class Verdict:
     e.g. ``static torque 140 N m > 100 N m (joint 2, goal)``. ``figures`` holds the closest
     misses seen (``ik_error`` [m], ``torque_ratio``, ``clearance`` [m], ``reach_margin`` [m]).
     For a passing composition, ``q_start``/``q_goal`` are the chosen boundary configurations
-    and ``time_bound`` [s] their velocity-limited lower bound on motion time; ``clear_pair`` is
-    the fastest ``(q_start, q_goal)`` whose straight joint-space line clears the obstacles, when
-    the chosen pair's does not (step C's fallback, see :func:`_boundary_pair`).
+    and ``time_bound`` [s] their velocity-limited lower bound on motion time.
     """
 
     composition: Composition
@@ -107,7 +105,6 @@ class Verdict:
     q_start: tuple[float, ...] | None = None
     q_goal: tuple[float, ...] | None = None
     time_bound: float | None = None
-    clear_pair: tuple[tuple[float, ...], tuple[float, ...]] | None = None
 
     @property
     def passed(self) -> bool:
@@ -118,8 +115,7 @@ class Verdict:
                "passed": self.passed, "failed_test": self.failed_test, "message": self.message,
                "figures": self.figures}
         if self.passed:
-            out.update(q_start=list(self.q_start), q_goal=list(self.q_goal), time_bound=self.time_bound,
-                       clear_pair=[list(q) for q in self.clear_pair] if self.clear_pair else None)
+            out.update(q_start=list(self.q_start), q_goal=list(self.q_goal), time_bound=self.time_bound)
         return out
 
 
@@ -230,12 +226,11 @@ def check_composition(
             tests_passed, _, message = outcome.closest
             return fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
         passing[label] = outcome.kept
-    (q_start, q_goal), clear = _boundary_pair(robot, collision, passing["start"], passing["goal"])
+    q_start, q_goal, bound = _boundary_pair(robot, collision, passing["start"], passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
     figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
-    return Verdict(composition, None, "feasible", figures, clock.seconds, tuple(map(float, q_start)),
-                   tuple(map(float, q_goal)), robot.travel_time_bound(q_start, q_goal),
-                   tuple(tuple(map(float, q)) for q in clear) if clear else None)
+    return Verdict(composition, None, "feasible", figures, clock.seconds,
+                   tuple(map(float, q_start)), tuple(map(float, q_goal)), bound)
 
 
 @dataclass
@@ -281,21 +276,19 @@ def _closer(best, candidate):
     return candidate if best is None or candidate[:2] > best[:2] else best
 
 
-def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals):
-    """The (start, goal) pair minimising ``max_i |q_goal,i - q_start,i| / qdot_max,i``, and the
-    fastest pair whose straight joint-space line clears the obstacles if that is another one.
+def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals) -> tuple[np.ndarray, np.ndarray, float]:
+    """The (start, goal) pair minimising ``max_i |q_goal,i - q_start,i| / qdot_max,i`` among the
+    pairs whose straight joint-space line clears the obstacles, else among all pairs.
 
-    Step C starts from the straight line. From a line through an obstacle it usually finds its
-    way round, and the fastest pair gave the best motions (forcing the clear pair cost the
-    low-10kg winner 41 %: 1.44 s instead of 1.02 s); but on paper-5kg four survivors settled on
-    a link jumping through an obstacle between two sub-steps. Three of them have a clear pair,
-    3-4 % slower, from which they verify; step C falls back to it. Joint limits of the paper
-    catalogue do not allow wrapping through +-pi, so the shortest way within limits is the plain
-    difference.
+    Step C starts from that straight line; from a line through an obstacle it tends to settle on
+    a motion whose link jumps through the obstacle between two sub-steps (measured on paper-5kg:
+    two of the four survivors that failed so had a clear pair 4 % and 3 % slower). Joint limits
+    of the paper catalogue do not allow wrapping through +-pi, so the shortest way within limits
+    is the plain difference.
     """
     pairs = sorted(itertools.product(starts, goals), key=lambda pair: robot.travel_time_bound(*pair))
-    clear = next((pair for pair in pairs if collision.path_clear(np.array(pair))), None)
-    return pairs[0], (clear if clear is not None and clear is not pairs[0] else None)
+    best = next((pair for pair in pairs if collision.path_clear(np.array(pair))), pairs[0])
+    return best[0], best[1], robot.travel_time_bound(*best)
 
 
 # -- many compositions -------------------------------------------------------------------------

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .candidate import Candidate, CandidateResult, composition_candidate
+from .candidate import Candidate, CandidateResult, composition_problem
 from .exceptions import InfeasibleError
 from .execution import make_engine
 from .feasibility import FeasibilitySettings, FeasibilitySummary, Verdict, filter_compositions
@@ -42,7 +42,9 @@ class RunResult:
 
 def make_candidate(scenario: Scenario, verdict: Verdict) -> Candidate:
     """The step-C candidate of a step-B survivor (picklable entry point for worker processes)."""
-    return composition_candidate(verdict.composition, scenario.catalog, scenario.task, scenario.optimizer, verdict)
+    problem = composition_problem(verdict.composition, scenario.catalog, scenario.task, scenario.optimizer,
+                                  verdict)
+    return Candidate(problem, verdict.composition.name)
 
 
 def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | None = None,

@@ -27,7 +27,7 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from modular_robots.candidate import Candidate, _crossing, composition_candidate, composition_problem
+from modular_robots.candidate import Candidate, _crossing, composition_problem
 from modular_robots.collision import SphereObstacle
 from modular_robots.composition import Composition
 from modular_robots.feasibility import check_composition
@@ -540,30 +540,6 @@ def test_a_candidate_stopped_at_the_iteration_limit_restarts_once_from_where_it_
     assert result.cost_history[10] == pytest.approx(result.cost_history[9], rel=0.2)  # no restart from scratch
     assert result.tf == pytest.approx(T_TRAP, rel=1e-3)
     assert result.constraint_violation < 1e-4
-
-
-def test_a_link_crossing_an_obstacle_falls_back_to_the_clear_boundary_pair():
-    """B-J1-L2-J1-L1-J1-L3-J1-L1-E1 on paper-5kg: from its fastest boundary pair the solver settles
-    on a plan whose link jumps through an obstacle between two clear sub-steps, and a refinement
-    leaves it as deep. The candidate then solves from step B's clear pair, from scratch (iteration
-    numbers run on), and that motion clears both obstacles on verification's dense grid."""
-    scenario = load_scenario(PAPER_5KG)
-    composition = Composition.from_name("B-J1-L2-J1-L1-J1-L3-J1-L1-E1", scenario.catalog)
-    verdict = check_composition(composition, scenario.catalog, scenario.task)
-    fastest = composition_problem(composition, scenario.catalog, scenario.task, scenario.optimizer, verdict)
-    crossing = ShootingSolver(fastest).solve()
-    assert crossing.status == "optimal"
-    assert verify(fastest, crossing.final.y).min_clearance < -0.1
-    assert np.all(fastest.evaluate(crossing.final.y, derivatives=False).clearance >= -1e-6)
-
-    candidate = composition_candidate(composition, scenario.catalog, scenario.task, scenario.optimizer, verdict)
-    result = candidate.solve()
-    assert result.status == "optimal", result.reason
-    np.testing.assert_allclose(candidate.problem.q_start, verdict.clear_pair[0])
-    np.testing.assert_allclose(candidate.problem.q_goal, verdict.clear_pair[1])
-    assert result.verification.min_clearance >= 0.0 and result.verification.terminal_error <= 0.01
-    assert result.iterations == len(result.cost_history) > crossing.iterations
-    assert result.cost_bound == pytest.approx(candidate.problem.cost_bound)
 
 
 def test_evaluation_error_fails_with_its_reason():
