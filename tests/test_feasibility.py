@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from modular_robots import CollisionModel, Composition, SphereObstacle, Task, enumerate_compositions, load_scenario, robot_model
+from modular_robots import Composition, SphereObstacle, Task, enumerate_compositions, load_scenario, robot_model
 from modular_robots.cli import main
 from modular_robots.execution import ProcessEngine, SerialEngine
 from modular_robots.feasibility import TESTS, FeasibilitySummary, check_composition, filter_compositions, max_reach
@@ -190,17 +190,3 @@ def test_filter_cli_on_a_small_catalogue(tmp_path):
 def test_cascade_order_is_rank_order():
     assert [t.rank for t in TESTS] == list(range(len(TESTS)))
     assert [t.name for t in TESTS] == ["reach", "inverse kinematics", "static torque", "collision"]
-
-
-def test_the_boundary_pair_prefers_a_straight_line_clear_of_the_obstacles(paper_catalog):
-    """B-J1-L2-J1-L1-J1-L3-J1-L1-E1 on paper-5kg: its fastest IK pair (2.153 s) sweeps a link
-    through the sphere at (1.5, -1.3, 1.1); a pair 4 % slower has a clear straight line."""
-    scenario = load_scenario(PAPER_5KG)
-    verdict = _check(paper_catalog, "B-J1-L2-J1-L1-J1-L3-J1-L1-E1", scenario.task)
-    assert verdict.passed
-    assert verdict.time_bound == pytest.approx(2.24, abs=0.01)
-    robot = robot_model(verdict.composition, paper_catalog, scenario.task.payload)
-    collision = CollisionModel(robot, scenario.task.obstacles)
-    q_start, q_goal = np.array(verdict.q_start), np.array(verdict.q_goal)
-    line = [q_start + s * (q_goal - q_start) for s in np.linspace(0.0, 1.0, 401)]
-    assert min(collision.distances(q).minimum for q in line) > 0.0
