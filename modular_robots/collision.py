@@ -18,8 +18,8 @@ from .robot import RobotModel
 
 __all__ = ["SphereObstacle", "CollisionModel", "Distances", "PATH_CLEARANCE"]
 
-#: Clearance a joint-space path must keep from every obstacle to count as clear [m] (step B's
-#: boundary pair, step C's initial guess).
+#: Clearance a joint-space path must keep from every obstacle to count as clear [m] (step C's
+#: initial guess).
 PATH_CLEARANCE = 0.02
 #: Below this distance between two sphere centres [m], python-fcl 0.7's signed distance query
 #: does not return (measured: 1e-4 m hangs, 1e-3 m answers), so the distance is computed here.
