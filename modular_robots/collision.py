@@ -78,26 +78,27 @@ class CollisionModel:
     def _axes(self, q: np.ndarray, kinematics_done: bool = False):
         return self.robot.primitive_axes(None if kinematics_done else q, self.primitive_indices)
 
-    def _place_one(self, i: int, rot, a, b) -> None:
-        self._robot_objects[i].setTransform(fcl.Transform(rot[i], 0.5 * (a[i] + b[i])))
+    def _place_one(self, i: int, rot, mid) -> None:
+        self._robot_objects[i].setTransform(fcl.Transform(rot[i], mid[i]))
 
     def distances(self, q: np.ndarray) -> Distances:
         """Signed distance of every (primitive, obstacle) pair at configuration ``q``."""
         rot, a, b = self._axes(q)
+        mid = 0.5 * (a + b)
         for i in range(len(self._robot_objects)):
-            self._place_one(i, rot, a, b)
+            self._place_one(i, rot, mid)
         shape = (len(self._robot_objects), len(self._obstacle_objects))
         dist = np.empty(shape)
         on_robot = np.empty(shape + (3,))
         on_obstacle = np.empty(shape + (3,))
-        mid = 0.5 * (a + b)
         to_mid = np.linalg.norm(self._centers[None, :, :] - mid[:, None, :], axis=2)
         for i in range(len(self._robot_objects)):
             for j in range(len(self._obstacle_objects)):
                 dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], to_mid[i, j])
         return Distances(dist, on_robot, on_obstacle)
 
-    def _pair_distance(self, i: int, j: int, center: np.ndarray, apart: float) -> tuple[float, np.ndarray, np.ndarray]:
+    def _pair_distance(self, i: int, j: int, center: np.ndarray,
+                       apart: float) -> tuple[float, np.ndarray, np.ndarray]:
         """Signed distance and witness points of placed primitive ``i`` (centred at ``center``,
         ``apart`` [m] from the obstacle's centre) and obstacle ``j``: FCL's, except for nearly
         concentric spheres (see :data:`CONCENTRIC`)."""
@@ -137,7 +138,7 @@ class CollisionModel:
             best = (np.inf, -1, None, None)
             for i in np.flatnonzero(lower[:, j] <= upper[j] + 1e-12):
                 if not placed[i]:
-                    self._place_one(i, rot, a, b)
+                    self._place_one(i, rot, mid)
                     placed[i] = True
                 d, on_robot, on_obstacle = self._pair_distance(i, j, mid[i], to_mid[i, j])
                 if d < best[0]:
