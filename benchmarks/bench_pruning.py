@@ -27,7 +27,8 @@ def _summary(result) -> dict:
     return {
         "winner": result.winner.name, "winner_cost": result.winner.cost, "iterations": result.iterations,
         "rounds": result.rounds, "optimization_s": result.seconds["optimization"],
-        "feasibility_s": result.seconds["feasibility"], "candidates": len(result.candidates),
+        "feasibility_s": result.seconds["feasibility"], "compositions": len(result.feasibility.survivors),
+        "candidates": len(result.candidates),
         "optimal": statuses["optimal"], "pruned": statuses["pruned"], "failed": statuses["failed"],
         "worst_optimal_cost": max(optimal),
         "pruned_at": dict(sorted(Counter(c.pruned_at_iteration for c in result.candidates
@@ -115,7 +116,8 @@ def main() -> None:
         details[name] = {"ratio": ratio, "none": brute, "replayed_thresholds": replay(brute_run, scenario)}
         print(table(details[name]["replayed_thresholds"]))
         rows.append({
-            "scenario": name, "feasible": brute["candidates"], "winner_ratio": ratio["winner"],
+            "scenario": name, "feasible": brute["compositions"], "candidates": brute["candidates"],
+            "winner_ratio": ratio["winner"],
             "same_winner": ratio["winner"] == brute["winner"], "tf_s": ratio["winner_cost"],
             "iterations_ratio": ratio["iterations"], "iterations_none": brute["iterations"],
             "iteration_saving_x": brute["iterations"] / ratio["iterations"],

@@ -25,7 +25,10 @@ from .shooting import ShootingProblem
 from .solver import Iterate, ShootingSolver
 from .verification import Verification, verify
 
-__all__ = ["Candidate", "CandidateResult", "composition_problem"]
+__all__ = ["BOUNDARY_PAIRS", "Candidate", "CandidateResult", "composition_problem"]
+
+#: Step B's boundary pairs a composition is optimised from (see :func:`composition_problem`).
+BOUNDARY_PAIRS = ("fastest", "clear")
 
 
 @dataclass(frozen=True)
@@ -36,7 +39,9 @@ class CandidateResult:
     ``pruned`` (set by the pruning manager). ``cost`` in its unit [s], ``tf`` [s],
     ``cost_history`` and ``violation_history`` the cost and scaled constraint violation after
     every iteration, ``seconds`` spent in the solver and in
-    verification, ``y`` the last scaled decision vector.
+    verification, ``y`` the last scaled decision vector. ``composition`` names the composition
+    (``name`` names the candidate, unique in a run) and ``boundary_pair`` says which of step B's
+    boundary pairs it started from (:data:`BOUNDARY_PAIRS`).
     """
 
     name: str
@@ -56,10 +61,14 @@ class CandidateResult:
     y: np.ndarray | None = field(default=None, repr=False, compare=False)
     #: The problem's lower bound on the cost (:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`).
     cost_bound: float = 0.0
+    composition: str = ""
+    boundary_pair: str = "fastest"
 
     def to_json(self) -> dict:
         return {
-            "composition": self.name,
+            "composition": self.composition or self.name,
+            "candidate": self.name,
+            "boundary_pair": self.boundary_pair,
             "dof": self.dof,
             "status": self.status,
             "reason": self.reason,
@@ -102,6 +111,8 @@ class Candidate:
         paper-5kg: -0.12 m at 4, 8 and 16 sub-steps), so refinement stops there.
     jacobian
         ``exact`` or ``finite-difference`` (see :class:`~modular_robots.solver.ShootingSolver`).
+    composition, boundary_pair
+        Recorded in the result (default: ``name`` and ``fastest``).
     restart
         When a solve stops at the iteration limit, solve once more from where it stopped, with a
         fresh solver. Near some optima the SR1 approximation degenerates and trust-constr crawls
@@ -111,10 +122,13 @@ class Candidate:
     """
 
     def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 3,
-                 jacobian: str = "exact", restart: bool = True):
+                 jacobian: str = "exact", restart: bool = True, composition: str | None = None,
+                 boundary_pair: str = "fastest"):
         self.problem = problem
         self.restart = restart
         self.name = name or problem.robot.name
+        self.composition = composition or self.name
+        self.boundary_pair = boundary_pair
         self.max_refinements = max_refinements
         self.jacobian = jacobian
         self.result: CandidateResult | None = None
@@ -191,7 +205,8 @@ class Candidate:
             self.name, problem.nv, status, reason, last.iteration if last else 0, self._seconds,
             last.cost if last else np.nan, last.tf if last else np.nan,
             last.constraint_violation if last else np.nan, tuple(self.history), tuple(self.violations),
-            verification, problem.substeps, None, last.y if last else None, problem.cost_bound)
+            verification, problem.substeps, None, last.y if last else None, problem.cost_bound,
+            self.composition, self.boundary_pair)
         self.problem = problem
 
 
@@ -218,18 +233,36 @@ def _verification_failure(v: Verification) -> str:
 
 def composition_problem(composition: Composition, catalog: Catalog, task: Task,
                         settings: OptimizerSettings = OptimizerSettings(), verdict: Verdict | None = None,
-                        feasibility: FeasibilitySettings = FeasibilitySettings()) -> ShootingProblem:
+                        feasibility: FeasibilitySettings = FeasibilitySettings(),
+                        boundary_pair: str = "fastest") -> ShootingProblem:
     """The shooting problem of ``composition`` for ``task``; its boundary configurations come from
     step B's verdict (computed here if not given).
+
+    ``boundary_pair`` chooses them: ``fastest``, the IK pair with the smallest velocity-limited
+    travel time, or ``clear``, the fastest pair whose straight joint-space line clears the
+    obstacles (:attr:`~modular_robots.feasibility.Verdict.clear_pair`; step B records it only
+    when it is another pair). Step C starts from that straight line, and the two pairs can lead
+    to different optima: from a line through an obstacle the solver usually finds its way round
+    (the fastest pair gave the low-10kg winner, 1.02 s against 1.44 s from the clear pair), but
+    it can also settle on a link that jumps through the obstacle between two sub-steps (four
+    paper-5kg survivors; three of them verify from their clear pair).
 
     Raises
     ------
     InfeasibleError
-        If the composition is not feasible for the task (the verdict's message says why).
+        If the composition is not feasible for the task (the verdict's message says why), or it
+        has no such ``boundary_pair``.
     """
     if verdict is None:
         verdict = check_composition(composition, catalog, task, feasibility)
     if not verdict.passed:
         raise InfeasibleError(f"{composition.name} cannot do the task: {verdict.message}")
+    if boundary_pair == "fastest":
+        q_start, q_goal = verdict.q_start, verdict.q_goal
+    elif boundary_pair == "clear" and verdict.clear_pair is not None:
+        q_start, q_goal = verdict.clear_pair
+    else:
+        raise InfeasibleError(f"{composition.name} has no {boundary_pair!r} boundary pair (expected one of "
+                              f"{', '.join(p for p in BOUNDARY_PAIRS if p == 'fastest' or verdict.clear_pair)})")
     robot = robot_model(composition, catalog, task.payload)
-    return ShootingProblem(robot, verdict.q_start, verdict.q_goal, task.obstacles, task.cost, settings)
+    return ShootingProblem(robot, q_start, q_goal, task.obstacles, task.cost, settings)

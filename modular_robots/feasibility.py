@@ -94,7 +94,9 @@ class Verdict:
     e.g. ``static torque 140 N m > 100 N m (joint 2, goal)``. ``figures`` holds the closest
     misses seen (``ik_error`` [m], ``torque_ratio``, ``clearance`` [m], ``reach_margin`` [m]).
     For a passing composition, ``q_start``/``q_goal`` are the chosen boundary configurations
-    and ``time_bound`` [s] their velocity-limited lower bound on motion time.
+    and ``time_bound`` [s] their velocity-limited lower bound on motion time; ``clear_pair`` is
+    the fastest ``(q_start, q_goal)`` whose straight joint-space line clears the obstacles, when
+    the chosen pair's does not (step C optimises from both, see :func:`_boundary_pair`).
     """
 
     composition: Composition
@@ -105,6 +107,7 @@ class Verdict:
     q_start: tuple[float, ...] | None = None
     q_goal: tuple[float, ...] | None = None
     time_bound: float | None = None
+    clear_pair: tuple[tuple[float, ...], tuple[float, ...]] | None = None
 
     @property
     def passed(self) -> bool:
@@ -115,7 +118,8 @@ class Verdict:
                "passed": self.passed, "failed_test": self.failed_test, "message": self.message,
                "figures": self.figures}
         if self.passed:
-            out.update(q_start=list(self.q_start), q_goal=list(self.q_goal), time_bound=self.time_bound)
+            out.update(q_start=list(self.q_start), q_goal=list(self.q_goal), time_bound=self.time_bound,
+                       clear_pair=[list(q) for q in self.clear_pair] if self.clear_pair else None)
         return out
 
 
@@ -226,11 +230,12 @@ def check_composition(
             tests_passed, _, message = outcome.closest
             return fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
         passing[label] = outcome.kept
-    q_start, q_goal, bound = _boundary_pair(robot, passing["start"], passing["goal"])
+    (q_start, q_goal), clear = _boundary_pair(robot, collision, passing["start"], passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
     figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
-    return Verdict(composition, None, "feasible", figures, clock.seconds,
-                   tuple(map(float, q_start)), tuple(map(float, q_goal)), bound)
+    return Verdict(composition, None, "feasible", figures, clock.seconds, tuple(map(float, q_start)),
+                   tuple(map(float, q_goal)), robot.travel_time_bound(q_start, q_goal),
+                   tuple(tuple(map(float, q)) for q in clear) if clear else None)
 
 
 @dataclass
@@ -276,14 +281,18 @@ def _closer(best, candidate):
     return candidate if best is None or candidate[:2] > best[:2] else best
 
 
-def _boundary_pair(robot: RobotModel, starts, goals) -> tuple[np.ndarray, np.ndarray, float]:
-    """The (start, goal) pair minimising ``max_i |q_goal,i - q_start,i| / qdot_max,i``.
+def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals):
+    """The (start, goal) pair minimising ``max_i |q_goal,i - q_start,i| / qdot_max,i``, and the
+    fastest pair whose straight joint-space line clears the obstacles if that is another one.
 
-    Joint limits of the paper catalogue do not allow wrapping through +-pi, so the shortest
-    way within limits is the plain difference.
+    Step C starts from the straight line and optimises from both pairs, as two candidates (see
+    :func:`~modular_robots.candidate.composition_problem` for why neither alone suffices). Joint
+    limits of the paper catalogue do not allow wrapping through +-pi, so the shortest way within
+    limits is the plain difference.
     """
-    best = min(itertools.product(starts, goals), key=lambda pair: robot.travel_time_bound(*pair))
-    return best[0], best[1], robot.travel_time_bound(*best)
+    pairs = sorted(itertools.product(starts, goals), key=lambda pair: robot.travel_time_bound(*pair))
+    clear = next((pair for pair in pairs if collision.path_clear(np.array(pair))), None)
+    return pairs[0], (clear if clear is not None and clear is not pairs[0] else None)
 
 
 # -- many compositions -------------------------------------------------------------------------

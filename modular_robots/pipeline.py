@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .candidate import Candidate, CandidateResult, composition_problem
+from .candidate import BOUNDARY_PAIRS, Candidate, CandidateResult, composition_problem
 from .exceptions import InfeasibleError
 from .execution import make_engine
 from .feasibility import FeasibilitySettings, FeasibilitySummary, Verdict, filter_compositions
@@ -19,7 +19,7 @@ from .report import (PRUNING_PLOT, ResultsFolder, plot_pruning_history, result_d
                      winner_json)
 from .scenario import Scenario
 
-__all__ = ["RunResult", "run_scenario", "make_candidate", "with_pruning"]
+__all__ = ["CandidateSpec", "RunResult", "candidate_specs", "run_scenario", "make_candidate", "with_pruning"]
 
 logger = logging.getLogger(__name__)
 
@@ -40,11 +40,38 @@ class RunResult:
         return sum(c.iterations for c in self.candidates)
 
 
-def make_candidate(scenario: Scenario, verdict: Verdict) -> Candidate:
-    """The step-C candidate of a step-B survivor (picklable entry point for worker processes)."""
-    problem = composition_problem(verdict.composition, scenario.catalog, scenario.task, scenario.optimizer,
-                                  verdict)
-    return Candidate(problem, verdict.composition.name)
+@dataclass(frozen=True)
+class CandidateSpec:
+    """A step-C candidate to build: a step-B survivor and the boundary pair it starts from."""
+
+    verdict: Verdict
+    boundary_pair: str = "fastest"
+
+    @property
+    def name(self) -> str:
+        """The composition's name, suffixed ``+clear`` for its clear boundary pair."""
+        name = self.verdict.composition.name
+        return name if self.boundary_pair == "fastest" else f"{name}+{self.boundary_pair}"
+
+
+def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
+    """Every candidate of the survivors: one per boundary pair step B offers (the fastest, and the
+    fastest clear one when that is another pair; see
+    :func:`~modular_robots.candidate.composition_problem`)."""
+    for verdict in survivors:
+        yield CandidateSpec(verdict, BOUNDARY_PAIRS[0])
+        if verdict.clear_pair is not None:
+            yield CandidateSpec(verdict, BOUNDARY_PAIRS[1])
+
+
+def make_candidate(scenario: Scenario, spec: CandidateSpec | Verdict) -> Candidate:
+    """The step-C candidate of ``spec`` (a verdict alone: its fastest pair); the picklable entry
+    point for worker processes."""
+    spec = spec if isinstance(spec, CandidateSpec) else CandidateSpec(spec)
+    composition = spec.verdict.composition
+    problem = composition_problem(composition, scenario.catalog, scenario.task, scenario.optimizer, spec.verdict,
+                                  boundary_pair=spec.boundary_pair)
+    return Candidate(problem, spec.name, composition=composition.name, boundary_pair=spec.boundary_pair)
 
 
 def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | None = None,
@@ -76,6 +103,7 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
     summary = FeasibilitySummary()
     seconds: dict[str, float] = {}
     manager: PruningManager | None = None
+    specs: list[CandidateSpec] = []
     state = {"status": "running", "message": ""}
 
     def counts() -> dict:
@@ -85,7 +113,7 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
                       "feasible": len(summary.survivors)}
         if manager is not None:
             results = list(manager.results.values())
-            out_counts.update({"optimized": len(summary.survivors),
+            out_counts.update({"optimized": len(summary.survivors), "candidates": len(specs),
                                "pruned": sum(r.status == "pruned" for r in results),
                                "failed": sum(r.status == "failed" for r in results),
                                "optimal": sum(r.status == "optimal" for r in results)})
@@ -111,18 +139,19 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
             raise InfeasibleError(summary.diagnosis())
 
         survivors = sorted(summary.survivors, key=lambda v: (v.time_bound, v.composition.name))
-        names = [v.composition.name for v in survivors]
+        specs = list(candidate_specs(survivors))
+        names = [spec.name for spec in specs]
         if engine.jobs == 1:
-            executor = InProcessExecutor(make_candidate, scenario, survivors, names)
+            executor = InProcessExecutor(make_candidate, scenario, specs, names)
         else:
-            executor = ProcessExecutor(make_candidate, scenario, survivors, names, engine.jobs)
+            executor = ProcessExecutor(make_candidate, scenario, specs, names, engine.jobs)
         manager = PruningManager(executor, scenario.pruning)
         optimization_start = time.perf_counter()
         last_write = 0.0
         rounds = 0
         for progress in manager.rounds():
             rounds = progress.round
-            notify("optimization", _progress_figures(progress, len(survivors)))
+            notify("optimization", _progress_figures(progress, len(specs)))
             if folder is not None and time.perf_counter() - last_write > 1.0:
                 seconds["optimization"] = time.perf_counter() - optimization_start
                 write()
@@ -139,8 +168,7 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
         winner_block = None
         if folder is not None:
             report_start = time.perf_counter()
-            verdict = survivors[names.index(winner.name)]
-            problem = make_candidate(scenario, verdict).problem.refined(winner.substeps)
+            problem = make_candidate(scenario, specs[names.index(winner.name)]).problem.refined(winner.substeps)
             files = folder.write_winner(problem, winner)
             plot_pruning_history(results, winner.name, folder.file(PRUNING_PLOT),
                                  f"{scenario.name}: rule {scenario.pruning.rule}")

@@ -155,7 +155,8 @@ def candidates_json(results: Iterable[CandidateResult]) -> list[dict]:
 
 def winner_json(result: CandidateResult, files: dict) -> dict:
     """The ``winner`` block of ``result.json``."""
-    return {"composition": result.name, "dof": result.dof, "cost": result.cost, "tf": result.tf,
+    return {"composition": result.composition or result.name, "candidate": result.name,
+            "boundary_pair": result.boundary_pair, "dof": result.dof, "cost": result.cost, "tf": result.tf,
             "iterations": result.iterations, "seconds": round(result.seconds, 4), "substeps": result.substeps,
             "verification": result.verification.to_json() if result.verification else None, "files": files}
 

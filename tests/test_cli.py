@@ -1,11 +1,20 @@
 """The command line is a thin shell: check its output and its errors."""
 
+import csv
+import json
+
+import numpy as np
 import pinocchio as pin
+import pytest
 from click.testing import CliRunner
 
 from modular_robots.cli import main
+from modular_robots.composition import Composition
+from modular_robots.scenario import load_scenario
 
-from .conftest import PAPER_CATALOG, PAPER_SCENARIO
+from .conftest import PAPER_CATALOG, PAPER_SCENARIO, ROOT
+
+SMALL_SCENARIO = ROOT / "tests" / "data" / "small.yaml"
 
 
 def test_enumerate_count():
@@ -41,3 +50,27 @@ def test_errors_are_one_line_without_traceback(tmp_path):
     assert not (tmp_path / "x.urdf").exists()
     result = CliRunner().invoke(main, ["enumerate", str(PAPER_SCENARIO), "--count", "--dof", "9"])
     assert result.exit_code == 1 and result.output == "Error: --dof 9: the catalogue 'paper' allows 2 to 5 DOF\n"
+
+
+def test_optimize_writes_a_motion_from_start_to_goal(tmp_path):
+    """``optimize`` on one composition of the small scenario: the trajectory file starts at rest
+    at the start position, ends at rest at the goal (tool0, within verification's 1 cm), lasts the
+    reported ``tf``, and the URDF it writes loads in Pinocchio with the composition's joints."""
+    name = "B-J1-L3-J1-L3-E2"
+    out = tmp_path / "one"
+    result = CliRunner().invoke(main, ["optimize", name, "--scenario", str(SMALL_SCENARIO), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    doc = json.loads((out / "result.json").read_text())
+    assert (doc["status"], doc["partial"], doc["winner"]["composition"]) == ("done", False, name)
+    assert doc["winner"]["verification"]["passed"]
+    scenario = load_scenario(SMALL_SCENARIO)
+    with open(out / "trajectory.csv") as f:
+        rows = list(csv.DictReader(f))
+    nv = Composition.from_name(name, scenario.catalog).dof
+    assert pin.buildModelFromUrdf(str(out / "winner.urdf")).nv == nv == doc["winner"]["dof"]
+    assert list(rows[0])[:nv + 1] == ["t"] + [f"q{i}" for i in range(1, nv + 1)]
+    first, last = rows[0], rows[-1]
+    for row, target in ((first, scenario.task.start), (last, scenario.task.goal)):
+        assert np.linalg.norm([float(row[k]) - t for k, t in zip("xyz", target)]) < 0.01
+        assert all(abs(float(row[f"qd{i}"])) < 1e-6 for i in range(1, nv + 1))
+    assert float(first["t"]) == 0.0 and float(last["t"]) == pytest.approx(doc["winner"]["tf"], rel=1e-9)

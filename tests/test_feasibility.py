@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from modular_robots import Composition, SphereObstacle, Task, enumerate_compositions, load_scenario, robot_model
+from modular_robots import CollisionModel, Composition, SphereObstacle, Task, enumerate_compositions, load_scenario, robot_model
 from modular_robots.cli import main
 from modular_robots.execution import ProcessEngine, SerialEngine
 from modular_robots.feasibility import TESTS, FeasibilitySummary, check_composition, filter_compositions, max_reach
@@ -190,3 +190,24 @@ def test_filter_cli_on_a_small_catalogue(tmp_path):
 def test_cascade_order_is_rank_order():
     assert [t.rank for t in TESTS] == list(range(len(TESTS)))
     assert [t.name for t in TESTS] == ["reach", "inverse kinematics", "static torque", "collision"]
+
+
+def test_a_clear_pair_is_kept_when_the_fastest_pair_sweeps_through_an_obstacle(paper_catalog):
+    """B-J1-L2-J1-L1-J1-L3-J1-L1-E1 on paper-5kg: the straight line of its fastest IK pair
+    (2.153 s) sweeps a link through the sphere at (1.5, -1.3, 1.1); a pair 4 % slower is clear."""
+    scenario = load_scenario(PAPER_5KG)
+    verdict = _check(paper_catalog, "B-J1-L2-J1-L1-J1-L3-J1-L1-E1", scenario.task)
+    assert verdict.passed and verdict.clear_pair is not None
+    robot = robot_model(verdict.composition, paper_catalog, scenario.task.payload)
+    collision = CollisionModel(robot, scenario.task.obstacles)
+
+    def line_clearance(q_a, q_b):
+        q_a, q_b = np.array(q_a), np.array(q_b)
+        return min(collision.distances(q_a + s * (q_b - q_a)).minimum for s in np.linspace(0.0, 1.0, 401))
+
+    assert verdict.time_bound == pytest.approx(2.153, abs=1e-3)
+    assert line_clearance(verdict.q_start, verdict.q_goal) < -0.1
+    assert robot.travel_time_bound(*map(np.array, verdict.clear_pair)) == pytest.approx(2.24, abs=0.01)
+    assert line_clearance(*verdict.clear_pair) > 0.0
+    blocked = _check(paper_catalog, "B-J1-L3-J1-L2-J1-L1-J1-L1-E2", scenario.task)  # no pair is clear
+    assert blocked.passed and blocked.clear_pair is None

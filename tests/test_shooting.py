@@ -30,7 +30,9 @@ from scipy.integrate import solve_ivp
 from modular_robots.candidate import Candidate, _crossing, composition_problem
 from modular_robots.collision import SphereObstacle
 from modular_robots.composition import Composition
+from modular_robots.exceptions import InfeasibleError
 from modular_robots.feasibility import check_composition
+from modular_robots.pipeline import candidate_specs, make_candidate
 from modular_robots.robot import Primitive, RobotModel
 from modular_robots.scenario import OptimizerSettings, load_scenario
 from modular_robots.shooting import NonFiniteError, ShootingProblem
@@ -579,6 +581,42 @@ def test_refinement_stops_when_a_clearance_deficit_does_not_shrink():
     assert not _crossing(checked(-0.01), checked(-0.003))
     assert not _crossing(checked(0.02), checked(-0.01))
     assert not _crossing(checked(-0.12), checked(0.01))
+
+
+def test_the_clear_boundary_pair_verifies_where_the_fastest_pair_crosses_an_obstacle():
+    """B-J1-L2-J1-L1-J1-L3-J1-L1-E1 on paper-5kg: from its fastest boundary pair the solver
+    settles on a motion that holds the clearance at every sub-step while a link jumps through an
+    obstacle between two of them (> 0.1 m deep on verification's dense grid). The same
+    composition's second candidate starts from step B's clear pair, and its motion verifies."""
+    scenario = load_scenario(PAPER_5KG)
+    name = "B-J1-L2-J1-L1-J1-L3-J1-L1-E1"
+    verdict = check_composition(Composition.from_name(name, scenario.catalog), scenario.catalog, scenario.task)
+    specs = list(candidate_specs([verdict]))
+    assert [(s.name, s.boundary_pair) for s in specs] == [(name, "fastest"), (f"{name}+clear", "clear")]
+    fastest, clear = (make_candidate(scenario, s) for s in specs)
+    np.testing.assert_array_equal(fastest.problem.q_start, verdict.q_start)
+    np.testing.assert_array_equal(clear.problem.q_goal, verdict.clear_pair[1])
+
+    crossing = ShootingSolver(fastest.problem).solve()
+    assert crossing.status == "optimal", crossing.reason
+    assert verify(fastest.problem, crossing.final.y).min_clearance < -0.1
+    result = clear.solve()
+    assert result.status == "optimal", result.reason
+    assert result.verification.passed and result.verification.min_clearance >= 0.0
+    assert (result.composition, result.boundary_pair) == (name, "clear")
+    assert result.to_json()["composition"] == name and result.to_json()["candidate"] == f"{name}+clear"
+
+
+def test_a_composition_without_a_clear_pair_has_one_candidate():
+    scenario = load_scenario(PAPER_5KG)
+    name = "B-J1-L1-J1-L3-J1-L3-J1-L1-E1"
+    composition = Composition.from_name(name, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    assert verdict.passed and verdict.clear_pair is None
+    assert [s.name for s in candidate_specs([verdict])] == [name]
+    with pytest.raises(InfeasibleError, match=r"^B-J1-L1-J1-L3-J1-L3-J1-L1-E1 has no 'clear' boundary pair "
+                                              r"\(expected one of fastest\)$"):
+        composition_problem(composition, scenario.catalog, scenario.task, verdict=verdict, boundary_pair="clear")
 
 
 def test_refinement_doubles_substeps_until_the_motion_verifies():
