@@ -41,7 +41,7 @@ from .exceptions import (
     ScenarioError,
 )
 from .candidate import Candidate, CandidateResult, composition_problem
-from .pipeline import RunResult, run_scenario
+from .pipeline import CandidateSpec, RunResult, candidate_specs, make_candidate, run_scenario
 from .pruning import InProcessExecutor, ProcessExecutor, PruningManager, ratio_rule
 from .robot import Primitive, RobotModel, robot_model
 from .shooting import ShootingProblem
@@ -55,6 +55,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Candidate",
     "CandidateResult",
+    "CandidateSpec",
     "InProcessExecutor",
     "InfeasibleError",
     "Iterate",
@@ -66,7 +67,9 @@ __all__ = [
     "SolverOutcome",
     "Trajectory",
     "Verification",
+    "candidate_specs",
     "composition_problem",
+    "make_candidate",
     "ratio_rule",
     "run_scenario",
     "sample_trajectory",

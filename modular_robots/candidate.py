@@ -241,17 +241,19 @@ def composition_problem(composition: Composition, catalog: Catalog, task: Task,
     ``boundary_pair`` chooses them: ``fastest``, the IK pair with the smallest velocity-limited
     travel time, or ``clear``, the fastest pair whose straight joint-space line clears the
     obstacles (:attr:`~modular_robots.feasibility.Verdict.clear_pair`; step B records it only
-    when it is another pair). Step C starts from that straight line, and the two pairs can lead
-    to different optima: from a line through an obstacle the solver usually finds its way round
-    (the fastest pair gave the low-10kg winner, 1.02 s against 1.44 s from the clear pair), but
+    when it is another pair). The two pairs can lead to different optima. From the fastest pair
+    (whose initial guess then detours through a via configuration, see
+    :class:`~modular_robots.shooting.ShootingProblem`) the solver usually finds its way round the
+    obstacle, and that gave the low-10kg winner, 1.02 s against 1.44 s from the clear pair; but
     it can also settle on a link that jumps through the obstacle between two sub-steps (four
     paper-5kg survivors; three of them verify from their clear pair).
 
     Raises
     ------
     InfeasibleError
-        If the composition is not feasible for the task (the verdict's message says why), or it
-        has no such ``boundary_pair``.
+        If the composition is not feasible for the task (the verdict's message says why).
+    ValueError
+        If it has no such ``boundary_pair``.
     """
     if verdict is None:
         verdict = check_composition(composition, catalog, task, feasibility)
@@ -262,7 +264,8 @@ def composition_problem(composition: Composition, catalog: Catalog, task: Task,
     elif boundary_pair == "clear" and verdict.clear_pair is not None:
         q_start, q_goal = verdict.clear_pair
     else:
-        raise InfeasibleError(f"{composition.name} has no {boundary_pair!r} boundary pair (expected one of "
-                              f"{', '.join(p for p in BOUNDARY_PAIRS if p == 'fastest' or verdict.clear_pair)})")
+        have = "fastest and clear" if verdict.clear_pair is not None else "only fastest"
+        raise ValueError(f"{composition.name} has no {boundary_pair!r} boundary pair (it has {have}; a clear "
+                         "pair exists only when the fastest pair's straight line is not clear)")
     robot = robot_model(composition, catalog, task.payload)
     return ShootingProblem(robot, q_start, q_goal, task.obstacles, task.cost, settings)

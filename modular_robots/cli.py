@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from .candidate import BOUNDARY_PAIRS
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InfeasibleError, ModularRobotsError
 from .execution import make_engine
@@ -132,19 +133,28 @@ def optimize_command(composition: str, scenario_path: Path, out: Path, transcrip
                      max_iterations: int | None) -> None:
     """Step C for one COMPOSITION: a verified minimum-cost trajectory and its results folder.
 
-    A composition whose fastest IK pair's straight line crosses an obstacle is optimised from its
-    fastest clear pair too, and the better verified motion wins (as in ``run``).
+    A composition whose fastest IK pair's straight line passes an obstacle is optimised from its
+    fastest clear pair too, one after the other, and the better verified motion wins (as in
+    ``run``); NAME+clear or NAME+fastest optimises from that pair only.
     """
     scenario = load_scenario(scenario_path)
     overrides = {k: v for k, v in (("transcription", transcription), ("max_iterations", max_iterations)) if v}
     scenario = replace(scenario, optimizer=replace(scenario.optimizer, **overrides))
-    chain = Composition.from_name(composition, scenario.catalog)
+    name, _, only = composition.partition("+")
+    if only and only not in BOUNDARY_PAIRS:
+        raise click.BadParameter(f"{composition!r}: the suffix after '+' must be one of {', '.join(BOUNDARY_PAIRS)}",
+                                 param_hint="COMPOSITION")
+    chain = Composition.from_name(name, scenario.catalog)
     start = time.perf_counter()
     verdict = check_composition(chain, scenario.catalog, scenario.task)
     feasibility_seconds = time.perf_counter() - start
     if not verdict.passed:
         raise InfeasibleError(f"{chain.name} cannot do the task: {verdict.message}")
-    candidates = [make_candidate(scenario, spec) for spec in candidate_specs([verdict])]
+    specs = [s for s in candidate_specs([verdict]) if not only or s.boundary_pair == only]
+    if not specs:
+        raise click.ClickException(f"{chain.name} has no clear boundary pair: the straight line of its fastest "
+                                   "pair already clears the obstacles, or no pair's line does")
+    candidates = [make_candidate(scenario, spec) for spec in specs]
     folder = ResultsFolder(out)
     counts = {"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates), "pruned": 0}
 
@@ -154,6 +164,10 @@ def optimize_command(composition: str, scenario_path: Path, out: Path, transcrip
                                {"feasibility": feasibility_seconds,
                                 "optimization": sum(c.seconds for c in candidates)},
                                results, winner, time.perf_counter() - start, partial, status, message)
+
+    def best():
+        optimal = [c for c in candidates if c.result is not None and c.result.status == "optimal"]
+        return min(optimal, key=lambda c: c.result.cost) if optimal else None
 
     folder.write_result(document("running", True))
     try:
@@ -166,20 +180,26 @@ def optimize_command(composition: str, scenario_path: Path, out: Path, transcrip
     except KeyboardInterrupt:
         for candidate in candidates:
             candidate.close()
-        folder.write_result(document("interrupted", True, message="interrupted by the user"))
+        done = best()
+        winner = winner_json(done.result, folder.write_winner(done.problem, done.result)) if done else None
+        folder.write_result(document("interrupted", True, winner, "interrupted by the user" + (
+            f"; {done.name} had already verified and is written as the winner so far" if done else "")))
         raise
-    optimal = [c for c in candidates if c.result.status == "optimal"]
-    if not optimal:
+    finally:
+        for candidate in candidates:
+            if candidate.result is None:
+                candidate.close()
+    done = best()
+    if done is None:
         reason = "; ".join(f"{c.name}: {c.result.reason}" for c in candidates)
         folder.write_result(document("failed", False, message=reason))
         raise click.ClickException(f"{reason} (see {folder.file(RESULT)})")
-    best = min(optimal, key=lambda c: c.result.cost)
-    result = best.result
-    files = folder.write_winner(best.problem, result)
+    result = done.result
+    files = folder.write_winner(done.problem, result)
     folder.write_result(document("done", False, winner_json(result, files)))
     v = result.verification
     for candidate in candidates:
-        if candidate is not best:
+        if candidate is not done:
             click.echo(f"{candidate.name}: {candidate.result.status}, cost {candidate.result.cost:.4g}, "
                        f"{candidate.result.iterations} iterations, {candidate.result.seconds:.2f} s", err=True)
     click.echo(f"{result.name}: tf = {result.tf:.4f} s, cost {result.cost:.4g}, {result.iterations} iterations, "
@@ -232,7 +252,9 @@ def _run_table(result, scenario) -> str:
         ("verification", f"terminal error {v.terminal_error * 1000:.3f} mm, min clearance "
                          f"{v.min_clearance:.4f} m, {w.substeps} sub-steps"),
         ("compositions", f"{result.feasibility.checked} enumerated, {len(result.feasibility.survivors)} feasible"),
-        ("candidates", f"{len(statuses)} optimised (one per boundary pair): {statuses.count('optimal')} optimal, "
+        ("candidates", f"{len(statuses)} optimised ({len(result.feasibility.survivors)} compositions, "
+                       f"{sum(c.boundary_pair == 'clear' for c in result.candidates)} also from a clear pair): "
+                       f"{statuses.count('optimal')} optimal, "
                        f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed"),
         ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),
         ("wall time [s]", ", ".join(f"{k} {s:.1f}" for k, s in result.seconds.items())),

@@ -95,8 +95,9 @@ class Verdict:
     misses seen (``ik_error`` [m], ``torque_ratio``, ``clearance`` [m], ``reach_margin`` [m]).
     For a passing composition, ``q_start``/``q_goal`` are the chosen boundary configurations
     and ``time_bound`` [s] their velocity-limited lower bound on motion time; ``clear_pair`` is
-    the fastest ``(q_start, q_goal)`` whose straight joint-space line clears the obstacles, when
-    the chosen pair's does not (step C optimises from both, see :func:`_boundary_pair`).
+    the fastest ``(q_start, q_goal)`` whose straight joint-space line keeps 0.02 m from every
+    obstacle when the chosen pair's does not, else None (step C optimises from both, see
+    :func:`_boundary_pair`).
     """
 
     composition: Composition
@@ -283,16 +284,18 @@ def _closer(best, candidate):
 
 def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals):
     """The (start, goal) pair minimising ``max_i |q_goal,i - q_start,i| / qdot_max,i``, and the
-    fastest pair whose straight joint-space line clears the obstacles if that is another one.
+    fastest pair whose straight joint-space line keeps
+    :data:`~modular_robots.collision.PATH_CLEARANCE` from the obstacles if that is another one
+    (None otherwise).
 
-    Step C starts from the straight line and optimises from both pairs, as two candidates (see
+    Step C optimises from both pairs, as two candidates (see
     :func:`~modular_robots.candidate.composition_problem` for why neither alone suffices). Joint
     limits of the paper catalogue do not allow wrapping through +-pi, so the shortest way within
     limits is the plain difference.
     """
     pairs = sorted(itertools.product(starts, goals), key=lambda pair: robot.travel_time_bound(*pair))
-    clear = next((pair for pair in pairs if collision.path_clear(np.array(pair))), None)
-    return pairs[0], (clear if clear is not None and clear is not pairs[0] else None)
+    clear = next((i for i, pair in enumerate(pairs) if collision.path_clear(np.array(pair))), None)
+    return pairs[0], (pairs[clear] if clear else None)
 
 
 # -- many compositions -------------------------------------------------------------------------

@@ -122,7 +122,7 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
     def write(winner=None, partial=True):
         if folder is None:
             return
-        results = list(manager.results.values()) if manager else []
+        results = _labelled(manager.results.values(), specs) if manager else []
         folder.write_result(result_document(
             scenario, settings_json(scenario, jobs=engine.jobs), counts(), seconds, results, winner,
             time.perf_counter() - start, partial, state["status"], state["message"]))
@@ -157,7 +157,7 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
                 write()
                 last_write = time.perf_counter()
         seconds["optimization"] = time.perf_counter() - optimization_start
-        results = list(manager.results.values())
+        results = _labelled(manager.results.values(), specs)
         optimal = [r for r in results if r.status == "optimal"]
         if not optimal:
             reasons = "; ".join(f"{r.name}: {r.reason}" for r in results[:3])
@@ -183,6 +183,15 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
                                                    "were stopped")
         write()
         raise
+
+
+def _labelled(results: Iterable[CandidateResult], specs: list[CandidateSpec]) -> list[CandidateResult]:
+    """``results`` with their composition and boundary pair filled in where a candidate never ran
+    (a result made without its :class:`~modular_robots.candidate.Candidate`)."""
+    by_name = {spec.name: spec for spec in specs}
+    return [r if r.composition or r.name not in by_name else
+            replace(r, composition=by_name[r.name].verdict.composition.name,
+                    boundary_pair=by_name[r.name].boundary_pair) for r in results]
 
 
 def _progress_figures(progress: Progress, total: int) -> dict:

@@ -37,12 +37,13 @@ Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSe
   when it was already trusted ``window`` iterations ago, and it is kept while the fall of its cost over that window,
   repeated ``lookahead`` more times, would bring it back within the threshold: a candidate far
   above the reference needs a steep fall to be kept, one just above it a gentle one. The
-  defaults (a 6-iteration window, 3 more: 18 iterations ahead) were chosen on replays of the
-  brute-force histories of paper-5kg and low-10kg (``benchmarks/bench_pruning.py``): against
-  10 and 2 (20 ahead) they keep both winners and save 3.15x instead of 2.82x iterations on
-  paper-5kg, because a fall that has slowed is seen sooner; their neighbours (windows 5-7,
-  lookahead 2-3) keep both winners too, while a window of 4, or a lookahead of 1.5 with a
-  window of 5 or 6, loses one.
+  defaults (a 6-iteration window, 3 more: 18 iterations ahead) were chosen by replaying one
+  brute-force run of paper-5kg and of low-10kg through this manager for windows 3-20 and
+  lookaheads 0-3 (the sweep is in the message of the commit that set them): against 10 and 2
+  (20 ahead) they keep both winners and save 3.15x instead of 2.82x iterations on paper-5kg,
+  because a fall that has slowed is seen sooner; their neighbours (windows 5-7, lookahead 2-3)
+  keep both winners too, while a window of 4, or a lookahead of 1.5 with a window of 5 or 6,
+  loses one. Live (``make bench``): 3.20x against 2.83x, with the same winners.
 * **patience**: a candidate whose iterates are never trusted is never judged by the ratio, and
   such candidates mostly end at the iteration limit. Once a reference exists, a candidate that
   has not been trusted for ``patience`` iterations in a row is pruned (measured: every candidate

@@ -9,6 +9,7 @@ per module, in a module-scoped fixture, and shared by several tests.
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import multiprocessing
 import re
@@ -20,8 +21,10 @@ import pinocchio as pin
 import pytest
 from click.testing import CliRunner
 
+from modular_robots import feasibility
 from modular_robots.candidate import CandidateResult
 from modular_robots.cli import main
+from modular_robots.composition import Composition
 from modular_robots.pipeline import RunResult, run_scenario
 from modular_robots.pruning import (GUARD_VIOLATION, InProcessExecutor, ProcessExecutor, Progress,
                                     PruningManager, ratio_rule, reference_cost)
@@ -754,7 +757,8 @@ def test_small_result_json(small_run_1):
     assert {"feasibility", "optimization", "report"} <= set(doc["seconds"])
 
     candidates = doc["candidates"]
-    assert len(candidates) == 6 and len({c["composition"] for c in candidates}) == 6
+    assert len(candidates) == counts["candidates"] == 6 and len({c["composition"] for c in candidates}) == 6
+    assert {c["candidate"] for c in candidates} == {c["composition"] for c in candidates}
     for c in candidates:
         assert SPEC_CANDIDATE_FIELDS <= set(c), c["composition"]
         assert c["status"] in ("optimal", "pruned", "failed")
@@ -923,3 +927,39 @@ def test_cli_run_paper_fails_naming_static_torque(tmp_path):
     assert doc["status"] == "infeasible" and doc["partial"] is False
     assert doc["counts"]["enumerated"] == 3108 and doc["counts"]["feasible"] == 0
     assert "static torque" in doc["message"] and doc["winner"] is None
+
+
+def test_a_second_boundary_pair_runs_as_a_candidate_of_its_own(small_scenario, monkeypatch, tmp_path):
+    """Step B's second pair for one composition (here its second-fastest IK pair, standing in for
+    a clear one: the small scenario has none) becomes the candidate NAME+clear in the worker
+    processes. It optimises that pair, whose travel-time bound is its cost bound, and the results
+    name its composition and pair."""
+    name = "B-J1-L3-J1-L3-E2"
+    original = feasibility._boundary_pair
+    bounds = {}  # filled in this process by the check below (the run's step B is in worker processes)
+
+    def with_second_pair(robot, collision, starts, goals):
+        fastest, clear = original(robot, collision, starts, goals)
+        if robot.name != name:
+            return fastest, clear
+        pairs = sorted(itertools.product(starts, goals), key=lambda pair: robot.travel_time_bound(*pair))
+        bounds.update(fastest=robot.travel_time_bound(*pairs[0]), clear=robot.travel_time_bound(*pairs[1]))
+        return fastest, pairs[1]
+
+    monkeypatch.setattr(feasibility, "_boundary_pair", with_second_pair)
+    run = run_scenario(replace(small_scenario, pruning=replace(small_scenario.pruning, rule="none")), tmp_path,
+                       jobs=2)
+    composition = Composition.from_name(name, small_scenario.catalog)
+    verdict = feasibility.check_composition(composition, small_scenario.catalog, small_scenario.task)
+    assert verdict.clear_pair is not None and bounds["clear"] > bounds["fastest"]  # the patch, in this process
+    by_name = {c.name: c for c in run.candidates}
+    assert len(run.candidates) == 7 and {name, f"{name}+clear"} <= set(by_name)
+    for pair in ("fastest", "clear"):
+        result = by_name[name if pair == "fastest" else f"{name}+clear"]
+        assert (result.composition, result.boundary_pair) == (name, pair)
+        assert result.cost_bound == pytest.approx(bounds[pair], rel=1e-12)
+        assert result.status == "optimal" and result.cost >= result.cost_bound
+    doc = json.loads((tmp_path / "result.json").read_text())
+    assert doc["counts"]["candidates"] == 7 and doc["counts"]["optimized"] == 6
+    entries = {c["candidate"]: c for c in doc["candidates"]}
+    assert entries[f"{name}+clear"]["composition"] == name and entries[f"{name}+clear"]["boundary_pair"] == "clear"

@@ -18,19 +18,22 @@ Everything is seeded; no test is skipped.
 
 from __future__ import annotations
 
+import csv
 import importlib.metadata
+import json
 import math
 from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from click.testing import CliRunner
 from scipy.integrate import solve_ivp
 
 from modular_robots.candidate import Candidate, _crossing, composition_problem
+from modular_robots.cli import main
 from modular_robots.collision import SphereObstacle
 from modular_robots.composition import Composition
-from modular_robots.exceptions import InfeasibleError
 from modular_robots.feasibility import check_composition
 from modular_robots.pipeline import candidate_specs, make_candidate
 from modular_robots.robot import Primitive, RobotModel
@@ -583,7 +586,7 @@ def test_refinement_stops_when_a_clearance_deficit_does_not_shrink():
     assert not _crossing(checked(-0.12), checked(0.01))
 
 
-def test_the_clear_boundary_pair_verifies_where_the_fastest_pair_crosses_an_obstacle():
+def test_the_clear_boundary_pair_verifies_where_the_fastest_pair_crosses_an_obstacle(tmp_path):
     """B-J1-L2-J1-L1-J1-L3-J1-L1-E1 on paper-5kg: from its fastest boundary pair the solver
     settles on a motion that holds the clearance at every sub-step while a link jumps through an
     obstacle between two of them (> 0.1 m deep on verification's dense grid). The same
@@ -600,11 +603,16 @@ def test_the_clear_boundary_pair_verifies_where_the_fastest_pair_crosses_an_obst
     crossing = ShootingSolver(fastest.problem).solve()
     assert crossing.status == "optimal", crossing.reason
     assert verify(fastest.problem, crossing.final.y).min_clearance < -0.1
-    result = clear.solve()
-    assert result.status == "optimal", result.reason
-    assert result.verification.passed and result.verification.min_clearance >= 0.0
-    assert (result.composition, result.boundary_pair) == (name, "clear")
-    assert result.to_json()["composition"] == name and result.to_json()["candidate"] == f"{name}+clear"
+    # the clear pair's candidate, through `optimize NAME+clear`
+    cli = CliRunner().invoke(main, ["optimize", f"{name}+clear", "--scenario", str(PAPER_5KG), "--out", str(tmp_path)])
+    assert cli.exit_code == 0, cli.output
+    winner = json.loads((tmp_path / "result.json").read_text())["winner"]
+    assert (winner["composition"], winner["candidate"], winner["boundary_pair"]) == (name, f"{name}+clear", "clear")
+    assert winner["verification"]["passed"] and winner["verification"]["min_clearance"] >= 0.0
+    with open(tmp_path / "trajectory.csv") as f:
+        first = next(csv.DictReader(f))
+    np.testing.assert_allclose([float(first[f"q{i + 1}"]) for i in range(len(verdict.q_start))],
+                               verdict.clear_pair[0], atol=1e-9)
 
 
 def test_a_composition_without_a_clear_pair_has_one_candidate():
@@ -614,8 +622,9 @@ def test_a_composition_without_a_clear_pair_has_one_candidate():
     verdict = check_composition(composition, scenario.catalog, scenario.task)
     assert verdict.passed and verdict.clear_pair is None
     assert [s.name for s in candidate_specs([verdict])] == [name]
-    with pytest.raises(InfeasibleError, match=r"^B-J1-L1-J1-L3-J1-L3-J1-L1-E1 has no 'clear' boundary pair "
-                                              r"\(expected one of fastest\)$"):
+    with pytest.raises(ValueError, match=r"^B-J1-L1-J1-L3-J1-L3-J1-L1-E1 has no 'clear' boundary pair \(it has "
+                                         r"only fastest; a clear pair exists only when the fastest pair's "
+                                         r"straight line is not clear\)$"):
         composition_problem(composition, scenario.catalog, scenario.task, verdict=verdict, boundary_pair="clear")
 
 
