@@ -52,7 +52,7 @@ def build() -> str:
             "are lockstep rounds); a composition whose fastest IK pair's straight line crosses an obstacle is "
             "optimised from its fastest clear pair too |",
             f"| optimizer iterations, brute force | 1.5x the ratio rule's | {paper_row['iterations_none']} "
-            f"({paper_row['iteration_saving_x']:.2f}x the ratio rule's) | more candidates (75 vs 21) give pruning "
+            f"({paper_row['iteration_saving_x']:.2f}x the ratio rule's) | more candidates ({paper_row.get('candidates', paper_row['feasible'])} from {paper_row['feasible']} compositions vs 21) give pruning "
             "more to remove; trust-constr needs more iterations than fmincon's interior point |",
             f"| wall time saving of pruning | — | {paper_row['wall_saving_x']:.2f}x "
             f"({paper_row['wall_none_s']:.0f} s → {paper_row['wall_ratio_s']:.0f} s, steps C+D) | the paper gives none |",
