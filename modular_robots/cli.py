@@ -232,8 +232,10 @@ def run_command(scenario_path: Path, out: Path | None, rule: str | None, thresho
                 if f["checked"] % 50 == 0:
                     live.show(f"steps A+B: {f['checked']} compositions checked, {f['feasible']} feasible")
             else:
-                best = "-" if f["best_cost"] is None else f"{f['best_cost']:.4g}"
-                live.show(f"steps C+D: iteration {f['round']}, {f['alive']} of {f['total']} alive, best cost {best}")
+                best = "-" if f["best_optimal"] is None else f"{f['best_optimal']:.4g}"
+                reference = "-" if f["best_cost"] is None else f"{f['best_cost']:.4g}"
+                live.show(f"steps C+D: iteration {f['round']}, {f['alive']} of {f['total']} alive, best verified "
+                          f"cost {best}, pruning reference {reference}")
 
         result = run_scenario(scenario, out, jobs, on_progress=progress)
     click.echo(_run_table(result, scenario))

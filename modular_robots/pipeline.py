@@ -196,6 +196,7 @@ def _labelled(results: Iterable[CandidateResult], specs: list[CandidateSpec]) ->
 
 def _progress_figures(progress: Progress, total: int) -> dict:
     return {"round": progress.round, "alive": progress.alive, "total": total, "best_cost": progress.best_cost,
+            "best_optimal": progress.best_optimal,
             "pruned": progress.pruned, "finished": progress.finished}
 
 

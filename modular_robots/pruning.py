@@ -130,14 +130,18 @@ def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], conv
 
 @dataclass(frozen=True)
 class Progress:
-    """After each round: its number, the candidates still live, the best trusted cost so far
-    (None before any), and who was pruned or finished in this round."""
+    """After each round: its number, the candidates still live, the rule's guarded reference
+    ``best_cost`` (the best trusted cost in this round, None before any: it can rise when a
+    trusted iterate loses its trust), who was pruned or finished in this round, and
+    ``best_optimal``, the smallest cost of a candidate that has converged so far (None before
+    any; it never rises)."""
 
     round: int
     alive: int
     best_cost: float | None
     pruned: tuple[str, ...] = ()
     finished: tuple[str, ...] = ()
+    best_optimal: float | None = None
 
 
 class Executor(Protocol):
@@ -357,7 +361,8 @@ class PruningManager:
                 best = reference_cost({n: self.last[n].cost for n in alive if n in self.last},
                                       {n: self.last[n].constraint_violation for n in alive if n in self.last},
                                       converged, self.guard_violation)
-                yield Progress(round_, len(alive), best, tuple(sorted(pruned)), tuple(finished))
+                yield Progress(round_, len(alive), best, tuple(sorted(pruned)), tuple(finished),
+                               min(converged.values()) if converged else None)
         finally:
             try:
                 if alive:

@@ -446,6 +446,9 @@ def test_a_converged_cost_stays_the_reference_after_it_finished():
     assert results["c"].status == "optimal"
     assert progress[2].finished == ("a", "c") and progress[2].best_cost == 1.0
     assert all(p.best_cost == 1.0 for p in progress[2:])
+    # the best verified cost: none before round 3, then a's 1.0, never rising
+    assert [p.best_optimal for p in progress[:2]] == [None, None]
+    assert all(p.best_optimal == 1.0 for p in progress[2:])
 
 
 def test_a_failed_candidate_is_no_reference():
@@ -454,6 +457,7 @@ def test_a_failed_candidate_is_no_reference():
     results, progress = run_fakes(scripts)
     assert [r.status for r in results.values()] == ["failed", "optimal"]
     assert [p.best_cost for p in progress] == [1.2, 1.1, 1.4, 1.4, 1.55, 1.55, 1.55, 1.55]
+    assert [p.best_optimal for p in progress] == [None] * 7 + [1.55]  # a failed: never a best cost
 
 
 def test_a_converged_candidate_is_never_pruned():
