@@ -47,12 +47,12 @@ def build() -> str:
             "under convention A the paper's winner misses the start by centimetres (SPEC §3), and the payload "
             "is 5 kg, not 50 kg |",
             f"| optimizer iterations, ratio rule | 16 rounds, 4 candidates left | "
-            f"{paper_row['iterations_ratio']} iterations in total over {paper_row.get('candidates', paper_row['feasible'])} "
+            f"{paper_row['iterations_ratio']} iterations in total over {paper_row['candidates']} "
             f"candidates ({paper_row['feasible']} compositions) | we count every candidate's iterations (the paper's 16 "
             "are lockstep rounds); a composition whose fastest IK pair's straight line crosses an obstacle is "
             "optimised from its fastest clear pair too |",
             f"| optimizer iterations, brute force | 1.5x the ratio rule's | {paper_row['iterations_none']} "
-            f"({paper_row['iteration_saving_x']:.2f}x the ratio rule's) | more candidates ({paper_row.get('candidates', paper_row['feasible'])} from {paper_row['feasible']} compositions vs 21) give pruning "
+            f"({paper_row['iteration_saving_x']:.2f}x the ratio rule's) | more candidates ({paper_row['candidates']} from {paper_row['feasible']} compositions vs 21) give pruning "
             "more to remove; trust-constr needs more iterations than fmincon's interior point |",
             f"| wall time saving of pruning | — | {paper_row['wall_saving_x']:.2f}x "
             f"({paper_row['wall_none_s']:.0f} s → {paper_row['wall_ratio_s']:.0f} s, steps C+D) | the paper gives none |",
@@ -68,8 +68,7 @@ def build() -> str:
                   "| transcription | compositions verified (by any of its candidates) | candidates verified | "
                   "median s per candidate | median s, 5 DOF | median iterations |", "|---|---|---|---|---|---|"]
         for name, c in conv.items():
-            compositions = c.get("compositions", c["candidates"])
-            lines.append(f"| {name} | {c.get('compositions_converged', c['converged'])} of {compositions} "
+            lines.append(f"| {name} | {c['compositions_converged']} of {c['compositions']} "
                          f"({c['share'] * 100:.0f} %) | {c['converged']} of {c['candidates']} | "
                          f"{_fmt(c['median_seconds'])} | {_fmt(c['median_seconds_5dof'])} | "
                          f"{_fmt(c['median_iterations'])} |")
@@ -88,7 +87,7 @@ def build() -> str:
                   "| scenario | feasible / candidates | winner | same winner | iterations ratio / none | saving | "
                   "wall s ratio / none | saving | pruned |", "|---|---|---|---|---|---|---|---|---|"]
         for r in pruning["rows"]:
-            lines.append(f"| {r['scenario']} | {r['feasible']} / {r.get('candidates', r['feasible'])} | "
+            lines.append(f"| {r['scenario']} | {r['feasible']} / {r['candidates']} | "
                          f"{r['winner_ratio']} | {r['same_winner']} | "
                          f"{r['iterations_ratio']} / {r['iterations_none']} | {r['iteration_saving_x']:.2f}x | "
                          f"{r['wall_ratio_s']:.1f} / {r['wall_none_s']:.1f} | {r['wall_saving_x']:.2f}x | "

@@ -64,10 +64,8 @@ def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
             yield CandidateSpec(verdict, BOUNDARY_PAIRS[1])
 
 
-def make_candidate(scenario: Scenario, spec: CandidateSpec | Verdict) -> Candidate:
-    """The step-C candidate of ``spec`` (a verdict alone: its fastest pair); the picklable entry
-    point for worker processes."""
-    spec = spec if isinstance(spec, CandidateSpec) else CandidateSpec(spec)
+def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:
+    """The step-C candidate of ``spec`` (the picklable entry point for worker processes)."""
     composition = spec.verdict.composition
     problem = composition_problem(composition, scenario.catalog, scenario.task, scenario.optimizer, spec.verdict,
                                   boundary_pair=spec.boundary_pair)
