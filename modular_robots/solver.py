@@ -132,7 +132,7 @@ class ShootingSolver:
         self._thread.start()
         try:
             while self.outcome is None:
-                message = self._to_caller.get()
+                message = self._receive()
                 if isinstance(message, SolverOutcome):
                     self.outcome = message
                     return
@@ -162,17 +162,31 @@ class ShootingSolver:
     # -- internals ---------------------------------------------------------------------------
     def _shutdown(self) -> None:
         thread = self._thread
-        if thread is None or not thread.is_alive():
+        if thread is None:
             return
-        self._stop = True
-        self._resume.release()
-        while True:
-            message = self._to_caller.get()
-            if isinstance(message, SolverOutcome):
-                self.outcome = message
-                break
+        if self.outcome is None and thread.is_alive():
+            self._stop = True
             self._resume.release()
+            while True:
+                message = self._receive()
+                if isinstance(message, SolverOutcome):
+                    self.outcome = message
+                    break
+                self._resume.release()
+        # Once the outcome is in, the thread has nothing left to send; it may still be on its way
+        # out, so join rather than ask it to stop (asking would wait for a message never sent).
         thread.join()
+
+    def _receive(self) -> Iterate | SolverOutcome:
+        """The solver thread's next message; an outcome of its own if the thread ended silently."""
+        while True:
+            try:
+                return self._to_caller.get(timeout=1.0)
+            except queue.Empty:
+                if not self._thread.is_alive() and self._to_caller.empty():
+                    return SolverOutcome("failed", "the solver thread ended without an outcome",
+                                         self.last.iteration - self.iteration_offset if self.last else 0,
+                                         self._seconds, self.last)
 
     def _callback(self, intermediate_result) -> bool:
         state = intermediate_result  # scipy passes the new-style result only under this name

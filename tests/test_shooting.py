@@ -22,6 +22,8 @@ import csv
 import importlib.metadata
 import json
 import math
+import threading
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -517,6 +519,35 @@ def test_close_before_starting():
     solver.close()
     assert solver.outcome.status == "stopped"
     assert solver._thread is None
+
+
+class _SlowToExit(ShootingSolver):
+    """The solver thread posts its outcome, then takes a while to end (as a thread may when the
+    interpreter switches to the caller right after the post)."""
+
+    def _finish(self, *args, **kwargs):
+        super()._finish(*args, **kwargs)
+        time.sleep(0.3)
+
+
+class _DiesSilently(ShootingSolver):
+    def _finish(self, *args, **kwargs):
+        raise SystemExit  # ends the thread without an outcome and without a traceback
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
+@pytest.mark.parametrize("solver_class", [_SlowToExit, _DiesSilently])
+def test_solve_returns_however_the_solver_thread_ends(solver_class):
+    """A solve whose thread is still alive after posting its outcome (a hang seen in a
+    95-candidate run), or that ends without one, returns instead of waiting for a message."""
+    solver = solver_class(small_problem())
+    done = threading.Thread(target=solver.solve, daemon=True)
+    done.start()
+    done.join(timeout=20.0)
+    assert not done.is_alive(), "solve() hangs"
+    expected = "optimal" if solver_class is _SlowToExit else "failed"
+    assert solver.outcome.status == expected
+    assert not solver._thread.is_alive()
 
 
 def test_iteration_limit_fails_without_raising():
