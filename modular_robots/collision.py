@@ -68,6 +68,15 @@ class CollisionModel:
         ]
         self._prim_radii = np.array([p.radius for p in self._primitives], dtype=float)
         self._prim_lengths = np.array([p.length for p in self._primitives], dtype=float)
+        self._prim_offsets = np.array([p.offset for p in self._primitives], dtype=float)
+        model = robot.model
+        #: (P, nv): True where a joint velocity moves primitive i's frame.
+        self._supports = np.zeros((len(self._primitives), robot.nv), dtype=bool)
+        for i, fid in enumerate(self._frame_ids):
+            for joint in model.supports[model.frames[fid].parentJoint]:
+                if joint > 0:
+                    start = model.joints[joint].idx_v
+                    self._supports[i, start:start + model.joints[joint].nv] = True
         self._centers = np.array([o.center for o in self.obstacles], dtype=float).reshape(-1, 3)
         self._radii = np.array([o.radius for o in self.obstacles], dtype=float)
         self._obstacle_objects = [
@@ -110,50 +119,75 @@ class CollisionModel:
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
-        and (if asked) its exact gradient with respect to ``q``, ``(n_obstacles, nv)``.
+        and (if asked) its exact gradient with respect to ``q``, ``(n_obstacles, nv)``; one row of
+        :meth:`closest_many`."""
+        dist, grad = self.closest_many(np.asarray(q, dtype=float)[None], derivatives)
+        return dist[0], (grad[0] if derivatives else None)
 
-        Bounds from the primitives' axes (vectorised) discard the primitives that cannot be the
-        closest; FCL measures the others. The gradient of the distance between a convex primitive
-        and a sphere of centre ``c`` is ``n . dp/dq``: ``n`` is the unit direction from ``c`` to
-        the obstacle's witness point, ``p`` the robot's witness point moving with its frame
-        (Pinocchio frame Jacobian).
+    def closest_many(self, qs: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`closest` at every row of ``qs`` ``(K, nv)``: distances ``(K, n_obstacles)`` [m]
+        and gradients ``(K, n_obstacles, nv)``.
+
+        Bounds from the primitives' axes (vectorised over all configurations) discard the
+        primitives that cannot be the closest; FCL measures the others. The gradient of the
+        distance between a convex primitive and a sphere of centre ``c`` is ``n . dp/dq``: ``n``
+        is the unit direction from ``c`` to the obstacle's witness point, ``p`` the robot's
+        witness point moving with its frame. With Pinocchio's world-frame joint Jacobian ``J``
+        restricted to the joints that carry the frame, ``dp/dq = J_v + J_w x p``, so
+        ``n . dp/dq = n . J_v + (p x n) . J_w``.
         """
-        q = np.asarray(q, dtype=float)
-        model, data = self.robot.model, self.robot.data
-        if derivatives:
-            pin.computeJointJacobians(model, data, q)
-            pin.updateFramePlacements(model, data)
-        rot, a, b = self._axes(q, kinematics_done=derivatives)
-        placed = np.zeros(len(self._robot_objects), dtype=bool)
+        qs = np.asarray(qs, dtype=float).reshape(-1, self.robot.nv)
+        rot, origin, jac = self._frames(qs, derivatives)
+        axis = rot[..., 2]
+        a = origin + self._prim_offsets[:, None] * axis
+        mid = a + 0.5 * self._prim_lengths[:, None] * axis  # (K, P, 3)
         centers, radii = self._centers, self._radii
-        mid = 0.5 * (a + b)
-        to_mid = np.linalg.norm(centers[None, :, :] - mid[:, None, :], axis=2)  # (P, O)
+        to_mid = np.linalg.norm(centers[None, None] - mid[:, :, None], axis=3)  # (K, P, O)
         pad = self._prim_radii[:, None] + radii[None, :]
-        upper = (to_mid - pad).min(axis=0)
+        upper = (to_mid - pad).min(axis=1)  # (K, O)
         lower = to_mid - 0.5 * self._prim_lengths[:, None] - pad
-        n_obs = len(self.obstacles)
-        dist = np.empty(n_obs)
-        grad = np.zeros((n_obs, self.robot.nv)) if derivatives else None
-        for j in range(n_obs):
-            best = (np.inf, -1, None, None)
-            for i in np.flatnonzero(lower[:, j] <= upper[j] + 1e-12):
-                if not placed[i]:
-                    self._place_one(i, rot, mid)
-                    placed[i] = True
-                d, on_robot, on_obstacle = self._pair_distance(i, j, mid[i], to_mid[i, j])
-                if d < best[0]:
-                    best = (d, i, on_robot, on_obstacle)
-            dist[j], i, on_robot, on_obstacle = best
-            if derivatives:
-                fid = self._frame_ids[i]
-                jac = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-                normal = on_obstacle - centers[j]
-                normal /= math.sqrt(normal @ normal)
-                lever = on_robot - data.oMf[fid].translation
-                moment = (lever[1] * normal[2] - lever[2] * normal[1], lever[2] * normal[0] - lever[0] * normal[2],
-                          lever[0] * normal[1] - lever[1] * normal[0])  # lever x normal
-                grad[j] = normal @ jac[:3] + np.asarray(moment) @ jac[3:]
-        return dist, grad
+        measure = lower <= upper[:, None, :] + 1e-12
+        dist = np.full(measure.shape, np.inf)
+        on_robot = np.zeros(measure.shape + (3,))
+        on_obstacle = np.zeros(measure.shape + (3,))
+        ks, iis, js = np.nonzero(measure)  # grouped by (k, i): each primitive is placed once
+        found, placed = [], None
+        for k, i, j in zip(ks.tolist(), iis.tolist(), js.tolist()):
+            if placed != (k, i):
+                self._robot_objects[i].setTransform(fcl.Transform(rot[k, i], mid[k, i]))
+                placed = (k, i)
+            found.append(self._pair_distance(i, j, mid[k, i], to_mid[k, i, j]))
+        if found:
+            d, pr, po = zip(*found)
+            dist[ks, iis, js], on_robot[ks, iis, js], on_obstacle[ks, iis, js] = d, pr, po
+        best = dist.argmin(axis=1)  # (K, O)
+        rows = np.arange(len(qs))[:, None]
+        closest = dist[rows, best, np.arange(len(centers))]
+        if not derivatives:
+            return closest, None
+        p = on_robot[rows, best, np.arange(len(centers))]  # (K, O, 3)
+        normal = on_obstacle[rows, best, np.arange(len(centers))] - centers
+        normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+        grad = (np.einsum("koc,kcv->kov", normal, jac[:, :3])
+                + np.einsum("koc,kcv->kov", np.cross(p, normal), jac[:, 3:]))
+        return closest, grad * self._supports[best]
+
+    def _frames(self, qs: np.ndarray, jacobians: bool):
+        """Rotations ``(K, P, 3, 3)`` and origins ``(K, P, 3)`` of the primitives' frames and, if
+        asked, Pinocchio's world-frame joint Jacobian ``(K, 6, nv)`` at every configuration."""
+        model, data = self.robot.model, self.robot.data
+        n, P = len(qs), len(self._frame_ids)
+        poses = np.empty((n, P, 4, 4))
+        jac = np.empty((n, 6, self.robot.nv)) if jacobians else None
+        for k, q in enumerate(qs):
+            if jacobians:
+                pin.computeJointJacobians(model, data, q)
+                pin.updateFramePlacements(model, data)
+                jac[k] = data.J
+            else:
+                pin.framesForwardKinematics(model, data, q)
+            poses[k] = [data.oMf[fid].homogeneous for fid in self._frame_ids]
+        return poses[:, :, :3, :3], poses[:, :, :3, 3], jac
 
     def min_distance(self, q: np.ndarray) -> float:
         """Smallest signed distance between the robot and any obstacle [m] (inf: no obstacle)."""
@@ -161,14 +195,14 @@ class CollisionModel:
 
     def path_clear(self, path: np.ndarray, clearance: float = PATH_CLEARANCE, samples: int = 24) -> bool:
         """True if the joint-space polyline ``path`` ``(K, nv)``, sampled ``samples`` times per
-        segment, keeps ``clearance`` [m] from every obstacle (stops at the first sample that does not)."""
+        segment, keeps ``clearance`` [m] from every obstacle (stops at the first segment that does not)."""
         path = np.asarray(path, dtype=float)
         if not self.obstacles:
             return True
+        s = np.linspace(0.0, 1.0, samples + 1)[:, None]
         for a, b in zip(path[:-1], path[1:]):
-            for s in np.linspace(0.0, 1.0, samples + 1):
-                if self.closest(a + s * (b - a))[0].min() < clearance:
-                    return False
+            if self.closest_many(a + s * (b - a))[0].min() < clearance:
+                return False
         return True
 
     def in_collision(self, q: np.ndarray) -> bool:

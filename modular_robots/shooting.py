@@ -365,9 +365,7 @@ class ShootingProblem:
     def _clearance(self, qs: np.ndarray, derivatives: bool):
         if self.collision is None:
             return np.zeros((len(qs), 0)), (np.zeros((len(qs), 0, self.nv)) if derivatives else None)
-        found = [self.collision.closest(q, derivatives) for q in qs]
-        dist = np.array([f[0] for f in found])
-        return dist, (np.array([f[1] for f in found]) if derivatives else None)
+        return self.collision.closest_many(qs, derivatives)
 
     def _cost(self, tf: float, prop: Propagation, derivatives: bool):
         grad = np.zeros(self.n_variables) if derivatives else None

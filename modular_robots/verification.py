@@ -164,15 +164,16 @@ def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
             if not sol.success:
                 return Verification(np.inf, np.inf, np.inf, -np.inf, np.inf, np.inf, np.inf, 0, S)
             grid = np.linspace(j * hs, (j + 1) * hs, points_per_substep + 1)[:-1 if j < S - 1 else None]
-            for s, state in zip(grid, sol.sol(grid).T):
+            states = sol.sol(grid).T
+            for s, state in zip(grid, states):
                 q, v = state[:nv], state[nv:]
                 tau = tr.torque(robot, node, u, s)
                 pos_excess = max(pos_excess, float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span)))
                 vel_ratio = max(vel_ratio, float(np.max(np.abs(v) / vmax)))
                 tau_ratio = max(tau_ratio, float(np.max(np.abs(tau) / tmax)))
-                if problem.collision is not None:
-                    clearance = min(clearance, float(problem.collision.closest(q)[0].min()))
                 points += 1
+            if problem.collision is not None:
+                clearance = min(clearance, float(problem.collision.closest_many(states[:, :nv])[0].min()))
             x = sol.y[:, -1]
             gap += np.abs(x - (planned[m, j + 1] if j < S - 1 else nodes[m + 1])) / problem.x_scale
         defect = max(defect, float(np.max(gap)))
