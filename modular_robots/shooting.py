@@ -8,6 +8,13 @@ s_{m+1}``; position and velocity limits at every integration sub-step (plain bou
 nodes); obstacle clearance ``>= margin`` at every sub-step; torque limits (plain bounds when the
 controls are torques, else at every sub-step). Jacobians are exact and assembled sparse.
 
+When the velocity is linear in time within an interval (the inverse transcription), every
+sub-step's velocity lies between the two node velocities, so the node bounds already hold it and
+the sub-steps carry no velocity rows: the same feasible set with a sixth fewer inequalities
+(for a 5-DOF paper-5kg candidate, 1016 instead of 1226, each with a slack in trust-constr's
+barrier problem). Measured on the 95 paper-5kg candidates: median 2.34 s per candidate instead
+of 3.04 s, the same 87 converged.
+
 Between the sub-steps a motion could break a position limit unseen (measured on paper-5kg: a
 prismatic stroke overshooting its end by 0.1-0.2 % of its range). So the position limits are also kept
 at every sub-step's midpoint, on the cubic Hermite interpolant of its end states,
@@ -262,7 +269,10 @@ class ShootingProblem:
                 lo = hi = np.zeros((N, k, r))
                 sc = np.broadcast_to(self.x_scale, (N, k, r))
             elif name == "path":
-                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (self._x_lo, self._x_hi))
+                x_lo, x_hi = self._x_lo.copy(), self._x_hi.copy()
+                if self.transcription.velocity_linear_in_time:
+                    x_lo[nv:], x_hi[nv:] = -np.inf, np.inf  # the node bounds hold in between
+                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (x_lo, x_hi))
                 sc = np.broadcast_to(self.x_scale, (N, k, r))
             elif name == "midpoint":
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (self._x_lo[:nv], self._x_hi[:nv]))

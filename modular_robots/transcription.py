@@ -45,6 +45,9 @@ class Transcription:
     name: str = ""
     #: True when the controls are torques, so the torque limits are plain variable bounds.
     controls_are_torques: bool = False
+    #: True when the velocity is linear in time within each interval, so that its limits at the
+    #: nodes hold everywhere and the sub-steps need none.
+    velocity_linear_in_time: bool = False
 
     def propagate(self, robot: RobotModel, x0: np.ndarray, u: np.ndarray, tf: float,
                   intervals: int, substeps: int, derivatives: bool) -> Propagation:
@@ -156,6 +159,7 @@ class InverseDynamics(Transcription):
 
     name = "inverse"
     controls_are_torques = False
+    velocity_linear_in_time = True  # v(t) = v_m + u_m t
 
     def control_scale(self, robot, tf, intervals):
         return positive_or_one(robot.velocity_limit) * intervals / tf

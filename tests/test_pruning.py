@@ -882,7 +882,10 @@ def test_small_ratio_winner_equals_brute_force_winner(small_run_1, small_cli_non
         else:
             assert none[c.name]["iterations"] > c.iterations
             assert none[c.name]["cost_history"][:c.iterations] == pytest.approx(list(c.cost_history), rel=1e-9)
-    assert ratio.iterations < doc["totals"]["optimizer_iterations"]
+    # every candidate here ends within 1.2x of the best, so the rule may prune none of them; the
+    # totals then agree to the iteration, and each pruned candidate is a saving
+    saved = sum(none[c.name]["iterations"] - c.iterations for c in ratio.candidates if c.status == "pruned")
+    assert ratio.iterations == doc["totals"]["optimizer_iterations"] - saved
     for name in ("winner.urdf", "trajectory.csv", "joints.png", "pruning.png"):
         assert (out / name).is_file()
 
