@@ -6,7 +6,6 @@ spheres. Distances are signed: negative when the shapes overlap (penetration dep
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 

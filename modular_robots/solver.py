@@ -164,9 +164,10 @@ class ShootingSolver:
         thread = self._thread
         if thread is None:
             return
-        if self.outcome is None and thread.is_alive():
-            self._stop = True
-            self._resume.release()
+        if self.outcome is None:
+            if thread.is_alive():
+                self._stop = True
+                self._resume.release()
             while True:
                 message = self._receive()
                 if isinstance(message, SolverOutcome):
