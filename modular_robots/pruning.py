@@ -37,13 +37,18 @@ Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSe
   when it was already trusted ``window`` iterations ago, and it is kept while the fall of its cost over that window,
   repeated ``lookahead`` more times, would bring it back within the threshold: a candidate far
   above the reference needs a steep fall to be kept, one just above it a gentle one. The
-  defaults (a 6-iteration window, 3 more: 18 iterations ahead) were chosen by replaying one
-  brute-force run of paper-5kg and of low-10kg through this manager for windows 3-20 and
-  lookaheads 0-3 (the sweep is in the message of the commit that set them): against 10 and 2
-  (20 ahead) they keep both winners and save 3.15x instead of 2.82x iterations on paper-5kg,
-  because a fall that has slowed is seen sooner; their neighbours (windows 5-7, lookahead 2-3)
-  keep both winners too, while a window of 4, or a lookahead of 1.5 with a window of 5 or 6,
-  loses one. Live (``make bench``): 3.20x against 2.83x, with the same winners.
+  defaults (an 8-iteration window, 2 more: 16 iterations ahead) were chosen by replaying
+  brute-force runs of paper-5kg and of low-10kg through this manager on two sets of histories:
+  those of the commit that first set a window (swept over windows 3-20 and lookaheads 0-3; it
+  chose 6 and 3) and those after the solver changes of the next session, which move every
+  candidate's path (swept over windows 3-12 and lookaheads 1-3). trust-constr's progress is
+  bursty, so the boundary moves: on the second set (6, 3) prunes the low-10kg winner at
+  iteration 45 (cost 4.14 s, falling 0.6 s over the window; the next iteration it was at
+  3.16 s, and it ends at 1.02 s), and so does every window below 7, and a lookahead of 1 with
+  windows 7-9. (8, 2) sits inside the region that keeps both
+  winners on both sets, with every neighbour (windows 7-9, lookaheads 1.5-2.5) keeping them
+  too; it saves 3.04x and 2.99x iterations on the two paper-5kg replays, against 3.12x and
+  3.15x for (6, 3).
 * **patience**: a candidate whose iterates are never trusted is never judged by the ratio, and
   such candidates mostly end at the iteration limit. Once a reference exists, a candidate that
   has not been trusted for ``patience`` iterations in a row is pruned (measured: every candidate

@@ -62,8 +62,8 @@ class PruningSettings:
     rule: str = "ratio"
     threshold: float = 0.5
     start_iteration: int = 2
-    window: int = 6
-    lookahead: float = 3.0
+    window: int = 8
+    lookahead: float = 2.0
     patience: int = 75
 
 

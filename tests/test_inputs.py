@@ -158,6 +158,6 @@ def test_shipped_scenarios_load():
     assert paper.task.payload == 50.0 and paper.task.start == (1.5, 1.5, 2.0) and paper.task.goal == (-2.0, -1.2, 0.6)
     assert [(o.center, o.radius) for o in paper.task.obstacles] == [((1.5, -1.3, 1.1), 0.3), ((-1.2, 2.1, 0.8), 0.35)]
     assert (paper.optimizer.nodes, paper.pruning.rule, paper.pruning.threshold, paper.pruning.start_iteration) == (8, "ratio", 0.5, 2)
-    assert (paper.pruning.window, paper.pruning.lookahead, paper.pruning.patience) == (6, 3.0, 75)  # defaults
+    assert (paper.pruning.window, paper.pruning.lookahead, paper.pruning.patience) == (8, 2.0, 75)  # defaults
     five = load_scenario(PAPER_SCENARIO.with_name("paper-5kg.yaml"))
     assert five.task.payload == 5.0 and five.task.obstacles == paper.task.obstacles and five.catalog == paper.catalog

@@ -750,8 +750,8 @@ def test_small_result_json(small_run_1):
     doc = json.loads((out / "result.json").read_text())
     assert doc["status"] == "done" and doc["partial"] is False
     assert doc["scenario"] == "small"
-    assert doc["settings"]["pruning"] == {"rule": "ratio", "threshold": 0.5, "start_iteration": 2, "window": 6,
-                                          "lookahead": 3.0, "patience": 75}
+    assert doc["settings"]["pruning"] == {"rule": "ratio", "threshold": 0.5, "start_iteration": 2, "window": 8,
+                                          "lookahead": 2.0, "patience": 75}
     counts = doc["counts"]
     assert counts["enumerated"] == 516 and counts["feasible"] == 6 and counts["optimized"] == 6
     assert sum(counts["removed"].values()) == 516 - 6
