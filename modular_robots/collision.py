@@ -67,7 +67,8 @@ class CollisionModel:
         ]
         self._prim_radii = np.array([p.radius for p in self._primitives], dtype=float)
         self._prim_lengths = np.array([p.length for p in self._primitives], dtype=float)
-        self._prim_offsets = np.array([p.offset for p in self._primitives], dtype=float)
+        #: Distance from each primitive's frame origin to its axis midpoint, along the frame's z [m].
+        self._mid_offsets = np.array([p.offset + 0.5 * p.length for p in self._primitives], dtype=float)
         model = robot.model
         #: (P, nv): True where a joint velocity moves primitive i's frame.
         self._supports = np.zeros((len(self._primitives), robot.nv), dtype=bool)
@@ -83,18 +84,12 @@ class CollisionModel:
             for o in self.obstacles
         ]
 
-    def _axes(self, q: np.ndarray, kinematics_done: bool = False):
-        return self.robot.primitive_axes(None if kinematics_done else q, self.primitive_indices)
-
-    def _place_one(self, i: int, rot, mid) -> None:
-        self._robot_objects[i].setTransform(fcl.Transform(rot[i], mid[i]))
-
     def distances(self, q: np.ndarray) -> Distances:
         """Signed distance of every (primitive, obstacle) pair at configuration ``q``."""
-        rot, a, b = self._axes(q)
-        mid = 0.5 * (a + b)
-        for i in range(len(self._robot_objects)):
-            self._place_one(i, rot, mid)
+        rot, mid, _ = self._placements(np.asarray(q, dtype=float)[None], jacobians=False)
+        rot, mid = rot[0], mid[0]
+        for i, obj in enumerate(self._robot_objects):
+            obj.setTransform(fcl.Transform(rot[i], mid[i]))
         shape = (len(self._robot_objects), len(self._obstacle_objects))
         dist = np.empty(shape)
         on_robot = np.empty(shape + (3,))
@@ -136,10 +131,7 @@ class CollisionModel:
         ``n . dp/dq = n . J_v + (p x n) . J_w``.
         """
         qs = np.asarray(qs, dtype=float).reshape(-1, self.robot.nv)
-        rot, origin, jac = self._frames(qs, derivatives)
-        axis = rot[..., 2]
-        a = origin + self._prim_offsets[:, None] * axis
-        mid = a + 0.5 * self._prim_lengths[:, None] * axis  # (K, P, 3)
+        rot, mid, jac = self._placements(qs, derivatives)
         centers, radii = self._centers, self._radii
         to_mid = np.linalg.norm(centers[None, None] - mid[:, :, None], axis=3)  # (K, P, O)
         pad = self._prim_radii[:, None] + radii[None, :]
@@ -171,13 +163,13 @@ class CollisionModel:
                 + np.einsum("koc,kcv->kov", np.cross(p, normal), jac[:, 3:]))
         return closest, grad * self._supports[best]
 
-    def _frames(self, qs: np.ndarray, jacobians: bool):
-        """Rotations ``(K, P, 3, 3)`` and origins ``(K, P, 3)`` of the primitives' frames and, if
-        asked, Pinocchio's world-frame joint Jacobian ``(K, 6, nv)`` at every configuration."""
+    def _placements(self, qs: np.ndarray, jacobians: bool):
+        """Frame rotations ``(K, P, 3, 3)`` and axis midpoints ``(K, P, 3)`` of the primitives
+        (where their FCL shapes are centred) and, if asked, Pinocchio's world-frame joint Jacobian
+        ``(K, 6, nv)`` at every configuration."""
         model, data = self.robot.model, self.robot.data
-        n, P = len(qs), len(self._frame_ids)
-        poses = np.empty((n, P, 4, 4))
-        jac = np.empty((n, 6, self.robot.nv)) if jacobians else None
+        poses = np.empty((len(qs), len(self._frame_ids), 4, 4))
+        jac = np.empty((len(qs), 6, self.robot.nv)) if jacobians else None
         for k, q in enumerate(qs):
             if jacobians:
                 pin.computeJointJacobians(model, data, q)
@@ -186,7 +178,9 @@ class CollisionModel:
             else:
                 pin.framesForwardKinematics(model, data, q)
             poses[k] = [data.oMf[fid].homogeneous for fid in self._frame_ids]
-        return poses[:, :, :3, :3], poses[:, :, :3, 3], jac
+        rot = poses[:, :, :3, :3]
+        mid = poses[:, :, :3, 3] + self._mid_offsets[:, None] * rot[..., 2]
+        return rot, mid, jac
 
     def min_distance(self, q: np.ndarray) -> float:
         """Smallest signed distance between the robot and any obstacle [m] (inf: no obstacle)."""

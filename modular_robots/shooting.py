@@ -312,7 +312,6 @@ class ShootingProblem:
         self.n_constraints = int(keep_row.sum())
         self.constraint_lower = (lower / scale)[keep_row]
         self.constraint_upper = (upper / scale)[keep_row]
-        self._equality = (self.constraint_lower == self.constraint_upper)
 
     # -- evaluation ------------------------------------------------------------------------
     def evaluate(self, y: np.ndarray, derivatives: bool = True) -> Evaluation:
