@@ -15,14 +15,11 @@ import pinocchio as pin
 
 from .robot import RobotModel
 
-__all__ = ["SphereObstacle", "CollisionModel", "Distances", "PATH_CLEARANCE"]
+__all__ = ["SphereObstacle", "CollisionModel", "Distances", "PATH_CLEARANCE", "penetration"]
 
 #: Clearance a joint-space path must keep from every obstacle to count as clear [m] (step C's
 #: initial guess).
 PATH_CLEARANCE = 0.02
-#: Below this distance between two sphere centres [m], python-fcl 0.7's signed distance query
-#: does not return (measured: 1e-4 m hangs, 1e-3 m answers), so the distance is computed here.
-CONCENTRIC = 1e-3
 
 
 @dataclass(frozen=True)
@@ -94,22 +91,20 @@ class CollisionModel:
         dist = np.empty(shape)
         on_robot = np.empty(shape + (3,))
         on_obstacle = np.empty(shape + (3,))
-        to_mid = np.linalg.norm(self._centers[None, :, :] - mid[:, None, :], axis=2)
         for i in range(len(self._robot_objects)):
             for j in range(len(self._obstacle_objects)):
-                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], to_mid[i, j])
+                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], rot[i][:, 2])
         return Distances(dist, on_robot, on_obstacle)
 
-    def _pair_distance(self, i: int, j: int, center: np.ndarray,
-                       apart: float) -> tuple[float, np.ndarray, np.ndarray]:
-        """Signed distance and witness points of placed primitive ``i`` (centred at ``center``,
-        ``apart`` [m] from the obstacle's centre) and obstacle ``j``: FCL's, except for nearly
-        concentric spheres (see :data:`CONCENTRIC`)."""
-        if apart >= CONCENTRIC or self._prim_lengths[i] > 0.0:
-            return _distance(self._robot_objects[i], self._obstacle_objects[j])
-        u = (center - self._centers[j]) / apart if apart > 0.0 else np.array([0.0, 0.0, 1.0])
-        return (apart - self._prim_radii[i] - self._radii[j], center - self._prim_radii[i] * u,
-                self._centers[j] + self._radii[j] * u)
+    def _pair_distance(self, i: int, j: int, mid: np.ndarray,
+                       axis: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """Signed distance and witness points of primitive ``i``, placed (its FCL object) with its
+        axis midpoint at ``mid`` along the unit ``axis``, and obstacle ``j``: FCL's while they are
+        apart, :func:`penetration` when FCL reports an overlap."""
+        d, on_robot, on_obstacle = _separation(self._robot_objects[i], self._obstacle_objects[j])
+        if d >= 0.0:
+            return d, on_robot, on_obstacle
+        return penetration(mid, axis, self._prim_lengths[i], self._prim_radii[i], self._centers[j], self._radii[j])
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
@@ -147,7 +142,7 @@ class CollisionModel:
             if placed != (k, i):
                 self._robot_objects[i].setTransform(fcl.Transform(rot[k, i], mid[k, i]))
                 placed = (k, i)
-            found.append(self._pair_distance(i, j, mid[k, i], to_mid[k, i, j]))
+            found.append(self._pair_distance(i, j, mid[k, i], rot[k, i][:, 2]))
         if found:
             d, pr, po = zip(*found)
             dist[ks, iis, js], on_robot[ks, iis, js], on_obstacle[ks, iis, js] = d, pr, po
@@ -203,12 +198,31 @@ class CollisionModel:
         return self.min_distance(q) <= 0.0
 
 
-def _distance(a: fcl.CollisionObject, b: fcl.CollisionObject) -> tuple[float, np.ndarray, np.ndarray]:
+def _separation(a: fcl.CollisionObject, b: fcl.CollisionObject) -> tuple[float, np.ndarray, np.ndarray]:
+    """FCL's (unsigned) distance and nearest points; the distance is negative when they overlap."""
     request = fcl.DistanceRequest(enable_nearest_points=True)
     result = fcl.DistanceResult()
     d = fcl.distance(a, b, request, result)
-    if d < 0.0:  # overlapping: FCL's unsigned query says -1; ask for the penetration depth
-        request = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
-        result = fcl.DistanceResult()
-        d = fcl.distance(a, b, request, result)
     return d, np.asarray(result.nearest_points[0]), np.asarray(result.nearest_points[1])
+
+
+def penetration(mid: np.ndarray, axis: np.ndarray, length: float, radius: float, center: np.ndarray,
+                obstacle_radius: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Signed distance [m] and witness points (on the primitive, on the obstacle) of a capsule
+    (axis midpoint ``mid``, unit ``axis``, ``length``, ``radius``; a sphere when ``length`` is 0)
+    and a sphere obstacle: the distance from the obstacle's centre to the capsule's axis segment,
+    less both radii.
+
+    Used for overlapping pairs, in closed form because both shapes are swept spheres: FCL's
+    signed-distance query (EPA) can abort the whole process near contact with a C++
+    ``std::logic_error`` that Python cannot catch (FCL issues #390, #445, #493; reproduced with
+    python-fcl 0.7 on a 0.1 m port sphere 4.5 mm inside a 0.35 m obstacle), and it does not
+    return for nearly concentric spheres.
+    """
+    mid, axis, center = (np.asarray(v, dtype=float) for v in (mid, axis, center))
+    along = float(np.clip((center - mid) @ axis, -0.5 * length, 0.5 * length))
+    core = mid + along * axis
+    offset = center - core
+    apart = float(np.linalg.norm(offset))
+    toward = offset / apart if apart > 0.0 else np.array([0.0, 0.0, 1.0])  # any direction on the axis
+    return apart - radius - obstacle_radius, core + radius * toward, center - obstacle_radius * toward

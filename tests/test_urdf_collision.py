@@ -1,6 +1,10 @@
 """Generated URDF structure and FCL distances against hand-computed cases."""
 
 import math
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -93,7 +97,7 @@ def test_capsule_sphere_distance_by_hand(paper_catalog, center, radius, expected
     """L2 of B-J1-L2-E1 at q = 0 is the segment (0,0,0.25)-(0,0,1) with radius 0.1."""
     robot = robot_model(Composition.from_name("B-J1-L2-E1", paper_catalog), paper_catalog, 0.0)
     d, on_robot, on_obstacle = _distance_to(robot, [0.7, 0.0], "m2_L2_capsule", center, radius)
-    assert d == pytest.approx(expected, abs=1e-5 if expected < 0 else 1e-9)
+    assert d == pytest.approx(expected, abs=1e-12 if expected < 0 else 1e-9)
     if robot_point is not None:
         np.testing.assert_allclose(on_robot, robot_point, atol=1e-9)
         assert np.linalg.norm(on_obstacle - on_robot) == pytest.approx(d, abs=1e-9)
@@ -141,8 +145,9 @@ def test_path_clear_samples_every_segment(paper_catalog):
 @pytest.mark.parametrize("offset", [0.0, 5e-4, 2e-3])
 def test_an_obstacle_concentric_with_the_payload(paper_catalog, offset):
     """python-fcl's signed sphere-sphere query does not return for centres within 1e-4 m of each
-    other. The end effector's port sphere (radius 0.1 m) and the payload (0.05 m) are centred at
-    the tool point, so the distance is the port's, |c_a - c_b| - 0.1 - 0.1, from both queries."""
+    other, so overlaps are measured in closed form. The end effector's port sphere (radius 0.1 m)
+    and the payload (0.05 m) are centred at the tool point, so the distance is the port's,
+    |c_a - c_b| - 0.1 - 0.1, from both queries."""
     robot = robot_model(Composition.from_name("B-J1-L1-J1-L2-E1", paper_catalog), paper_catalog, 5.0)
     q = np.array([0.0, 1.0, 0.0])
     center = robot.tool_position(q) + np.array([offset, 0.0, 0.0])
@@ -150,6 +155,52 @@ def test_an_obstacle_concentric_with_the_payload(paper_catalog, offset):
     expected = offset - 0.1 - 0.1
     assert model.closest(q)[0][0] == pytest.approx(expected, abs=1e-6)
     assert model.min_distance(q) == pytest.approx(expected, abs=1e-6)
+
+
+def test_the_overlap_that_aborts_fcl_signed_distance_is_measured(tmp_path):
+    """Recorded while planning paths on B-J1-L1-J2-L3-J1-L3-J1-L1-E2: FCL's signed-distance query
+    (EPA) on this 0.1 m port sphere, 4.46 mm inside the paper's 0.35 m obstacle, throws a C++
+    std::logic_error that aborts the Python process (FCL issues #390, #445). The pair is placed
+    exactly as recorded and measured in a child process, so a regression fails this test instead
+    of killing the test run."""
+    script = tmp_path / "overlap.py"
+    script.write_text(textwrap.dedent("""
+        import fcl, numpy as np
+        from modular_robots import Composition, SphereObstacle, load_catalog
+        from modular_robots.collision import CollisionModel
+        from modular_robots.robot import robot_model
+        catalog = load_catalog("scenarios/catalogs/paper.yaml")
+        robot = robot_model(Composition.from_name("B-J1-L1-E1", catalog), catalog, 0.0)
+        center = np.array([-1.2, 2.1, 0.8])
+        model = CollisionModel(robot, [SphereObstacle(tuple(center), 0.35)])
+        port = [p.name for p in robot.primitives].index("m3_E1_port")
+        rot = np.array([[0.49519188992566887109, -0.78503617684964677181, -0.3721601714170045816],
+                        [-0.62756251427871634352, -0.61944991810257754583, 0.4716429683933450745],
+                        [-0.60079138045083513298, 3.9954836164102923278e-16, -0.79940585260303154147]])
+        at = np.array([-1.0063523648541286004, 2.2056442426030700155, 0.41290128416497140496])
+        model._robot_objects[port].setTransform(fcl.Transform(rot, at))
+        d, on_robot, on_obstacle = model._pair_distance(port, 0, at, rot[:, 2])
+        print(float(d), float(np.linalg.norm(at - center) - 0.45), float(np.linalg.norm(on_robot - on_obstacle)))
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr[-2000:]
+    d, expected, gap = map(float, done.stdout.split())
+    assert d == pytest.approx(expected, abs=1e-15) and d == pytest.approx(-0.00446, abs=1e-5)
+    assert gap == pytest.approx(-d, abs=1e-12)  # witness points one penetration depth apart
+
+
+def test_signed_distance_runs_straight_through_contact(paper_catalog):
+    """FCL measures a capsule and a sphere while apart, the closed form once they overlap: moved
+    along the capsule's normal through contact, the signed distance is the offset itself on both
+    sides, with no jump at zero."""
+    robot = robot_model(Composition.from_name("B-J1-L2-E1", paper_catalog), paper_catalog, 0.0)
+    q = np.array([0.7, 0.0])  # L2's axis: (0,0,0.25)-(0,0,1), radius 0.1
+    for gap in (3e-3, 1e-4, 1e-7, -1e-7, -1e-4, -3e-3):
+        model = CollisionModel(robot, [SphereObstacle((0.3 + gap, 0.0, 0.6), 0.2)])
+        d = model.distances(q)
+        i = [p.name for p in robot.primitives].index("m2_L2_capsule")
+        assert d.distance[i, 0] == pytest.approx(gap, abs=1e-9), gap
 
 
 def test_closest_many_equals_every_pair_measured_and_its_gradient(paper_catalog):
