@@ -245,8 +245,10 @@ def composition_problem(composition: Composition, catalog: Catalog, task: Task,
     (whose initial guess then detours through a via configuration, see
     :class:`~modular_robots.shooting.ShootingProblem`) the solver usually finds its way round the
     obstacle, and that gave the low-10kg winner, 1.02 s against 1.44 s from the clear pair; but
-    it can also settle on a link that jumps through the obstacle between two sub-steps (four
-    paper-5kg survivors; three of them verify from their clear pair).
+    it can also settle on a link that jumps through the obstacle between two sub-steps (six
+    paper-5kg candidates; three of their compositions verify from their clear pair). For those
+    pairs a sampling planner found no collision-free joint-space path at all (README, known
+    limits): the jump is what the solver makes of a motion with no clear way.
 
     Raises
     ------
