@@ -195,12 +195,10 @@ def test_signed_distance_runs_straight_through_contact(paper_catalog):
     along the capsule's normal through contact, the signed distance is the offset itself on both
     sides, with no jump at zero."""
     robot = robot_model(Composition.from_name("B-J1-L2-E1", paper_catalog), paper_catalog, 0.0)
-    q = np.array([0.7, 0.0])  # L2's axis: (0,0,0.25)-(0,0,1), radius 0.1
+    q = [0.7, 0.0]  # L2's axis: (0,0,0.25)-(0,0,1), radius 0.1
     for gap in (3e-3, 1e-4, 1e-7, -1e-7, -1e-4, -3e-3):
-        model = CollisionModel(robot, [SphereObstacle((0.3 + gap, 0.0, 0.6), 0.2)])
-        d = model.distances(q)
-        i = [p.name for p in robot.primitives].index("m2_L2_capsule")
-        assert d.distance[i, 0] == pytest.approx(gap, abs=1e-9), gap
+        d, *_ = _distance_to(robot, q, "m2_L2_capsule", (0.3 + gap, 0.0, 0.6), 0.2)
+        assert d == pytest.approx(gap, abs=1e-9), gap
 
 
 def test_closest_many_equals_every_pair_measured_and_its_gradient(paper_catalog):
