@@ -4,7 +4,7 @@ The pipeline, one module per stage: :mod:`~modular_robots.catalog` →
 :mod:`~modular_robots.composition` (step A) → :mod:`~modular_robots.urdf` →
 :mod:`~modular_robots.robot` and :mod:`~modular_robots.collision` →
 :mod:`~modular_robots.feasibility` (step B, run by an engine of :mod:`~modular_robots.execution`)
-→ :mod:`~modular_robots.shooting` / :mod:`~modular_robots.transcription` /
+→ :mod:`~modular_robots.shooting` / :mod:`~modular_robots.transcription` / :mod:`~modular_robots.guess` /
 :mod:`~modular_robots.solver` / :mod:`~modular_robots.verification` /
 :mod:`~modular_robots.candidate` (step C) → :mod:`~modular_robots.pruning` (step D) →
 :mod:`~modular_robots.report` (step E); :func:`run_scenario` chains them all.

@@ -3,8 +3,10 @@
 A :class:`Candidate` chains :class:`~modular_robots.solver.ShootingSolver` runs: it solves,
 verifies (:func:`~modular_robots.verification.verify`) and, when the re-integrated motion misses
 the goal by more than 1 cm or breaks a limit or the clearance between sub-steps, doubles the RK4
-sub-steps and solves again warm-started from the coarse solution (SPEC §5). Iteration numbers run
-on across refinements, so the pruning manager sees one sequence per candidate.
+sub-steps and solves again warm-started from the coarse solution (SPEC §5). When the first solve
+itself fails, it solves once more from a second initial guess
+(:func:`~modular_robots.guess.swing_path`). Iteration numbers run on across all of these, so the
+pruning manager sees one sequence per candidate.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from .catalog import Catalog
 from .composition import Composition
 from .exceptions import InfeasibleError
 from .feasibility import FeasibilitySettings, Verdict, check_composition
+from .guess import swing_path
 from .robot import robot_model
 from .scenario import OptimizerSettings, Task
 from .shooting import ShootingProblem
@@ -63,6 +66,8 @@ class CandidateResult:
     cost_bound: float = 0.0
     composition: str = ""
     boundary_pair: str = "fastest"
+    #: The joint-space path of the initial guess the solve started from (``y`` is scaled by it).
+    waypoints: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:
         return {
@@ -119,13 +124,19 @@ class Candidate:
         (one conjugate-gradient step per iteration, ended by negative curvature or the trust
         region); measured on two paper-5kg candidates stopped at 300 iterations while feasible, a
         restart converged in 30 and 73 iterations.
+    swing
+        When the first solve fails (after its restart), solve once more, cold, from
+        :func:`~modular_robots.guess.swing_path`'s guess, if it gives one: it made the two
+        paper-5kg compositions that hold the goal at the edge of a joint's torque limit converge.
+        Only a failed candidate pays for it, so the candidates that converge are unchanged.
     """
 
     def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 3,
                  jacobian: str = "exact", restart: bool = True, composition: str | None = None,
-                 boundary_pair: str = "fastest"):
+                 boundary_pair: str = "fastest", swing: bool = True):
         self.problem = problem
         self.restart = restart
+        self.swing = swing
         self.name = name or problem.robot.name
         self.composition = composition or self.name
         self.boundary_pair = boundary_pair
@@ -180,24 +191,40 @@ class Candidate:
         return solver.outcome
 
     def _run(self) -> Iterator[Iterate]:
-        problem, y0, offset, verification = self.problem, None, 0, None
+        problem, y0, offset, verification, note = self.problem, None, 0, None, ""
         for attempt in range(self.max_refinements + 1):
-            outcome = yield from self._solve(problem, y0, offset, attempt)
-            if outcome.limit_reached and self.restart and outcome.final is not None:
-                outcome = yield from self._solve(problem, outcome.final.y, outcome.final.iteration, attempt)
+            outcome = yield from self._solve_restarting(problem, y0, offset, attempt)
+            swung = swing_path(problem.robot, problem.collision, problem.waypoints) if (
+                outcome.status != "optimal" and attempt == 0 and self.swing) else None
+            if swung is not None:
+                note = f" (from a swing guess; from the first guess: {outcome.reason})"
+                offset = outcome.final.iteration if outcome.final is not None else self._iterations()
+                problem = problem.refined(waypoints=swung)
+                outcome = yield from self._solve_restarting(problem, None, offset, attempt)
             if outcome.status != "optimal":
-                self._finish(outcome.status, outcome.reason, problem, None)
+                self._finish(outcome.status, outcome.reason + note, problem, None)
                 return
             start = time.perf_counter()
             previous, verification = verification, verify(problem, outcome.final.y)
             self._seconds += time.perf_counter() - start
             if verification.passed:
-                self._finish("optimal", outcome.reason, problem, verification)
+                self._finish("optimal", outcome.reason + note, problem, verification)
                 return
             if attempt == self.max_refinements or _crossing(previous, verification):
                 break
             problem, y0, offset = problem.refined(2 * problem.substeps), outcome.final.y, outcome.final.iteration
-        self._finish("failed", _verification_failure(verification), problem, verification)
+        self._finish("failed", _verification_failure(verification) + note, problem, verification)
+
+    def _solve_restarting(self, problem: ShootingProblem, y0, offset: int, attempt: int):
+        """:meth:`_solve`, and once more from where it stopped if it hit the iteration limit
+        (``restart``)."""
+        outcome = yield from self._solve(problem, y0, offset, attempt)
+        if outcome.limit_reached and self.restart and outcome.final is not None:
+            outcome = yield from self._solve(problem, outcome.final.y, outcome.final.iteration, attempt)
+        return outcome
+
+    def _iterations(self) -> int:
+        return self.last.iteration if self.last is not None else 0
 
     def _finish(self, status: str, reason: str, problem: ShootingProblem, verification: Verification | None):
         last = self.last
@@ -206,7 +233,7 @@ class Candidate:
             last.cost if last else np.nan, last.tf if last else np.nan,
             last.constraint_violation if last else np.nan, tuple(self.history), tuple(self.violations),
             verification, problem.substeps, None, last.y if last else None, problem.cost_bound,
-            self.composition, self.boundary_pair)
+            self.composition, self.boundary_pair, problem.waypoints)
         self.problem = problem
 
 

@@ -166,7 +166,8 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
         winner_block = None
         if folder is not None:
             report_start = time.perf_counter()
-            problem = make_candidate(scenario, specs[names.index(winner.name)]).problem.refined(winner.substeps)
+            problem = make_candidate(scenario, specs[names.index(winner.name)]).problem
+            problem = problem.refined(winner.substeps, winner.waypoints)
             files = folder.write_winner(problem, winner)
             plot_pruning_history(results, winner.name, folder.file(PRUNING_PLOT),
                                  f"{scenario.name}: rule {scenario.pruning.rule}")

@@ -51,15 +51,12 @@ from scipy import sparse
 
 from .collision import CollisionModel, SphereObstacle
 from .exceptions import ModularRobotsError
+from .guess import detour_path, path_times
 from .robot import RobotModel
 from .scenario import COSTS, OptimizerSettings
 from .transcription import Propagation, positive_or_one, transcription
 
 __all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
-
-
-#: Random via configurations tried when the straight-line guess hits an obstacle.
-GUESS_TRIALS = 48
 
 
 class NonFiniteError(ModularRobotsError, ArithmeticError):
@@ -100,7 +97,7 @@ class ShootingProblem:
         Overrides ``settings.substeps`` (used by refinement).
     waypoints
         Joint-space path ``(K, nv)`` of the initial guess, from ``q_start`` to ``q_goal``
-        (default: see :meth:`_guess_path`).
+        (default: :func:`~modular_robots.guess.detour_path`).
     """
 
     def __init__(self, robot: RobotModel, q_start: Sequence[float], q_goal: Sequence[float],
@@ -139,7 +136,8 @@ class ShootingProblem:
         self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
         self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
 
-        self.waypoints = self._guess_path() if waypoints is None else np.asarray(waypoints, dtype=float)
+        self.waypoints = (detour_path(robot, self.collision, self.q_start, self.q_goal) if waypoints is None
+                          else np.asarray(waypoints, dtype=float))
         self.tf_guess, guess_nodes, guess_acc = self._initial_motion()
         #: The cost in its unit [s] is the scaled cost times this.
         self.cost_unit = self.tf_guess
@@ -176,14 +174,17 @@ class ShootingProblem:
         return float(z[0]), nodes, z[self._u0:].reshape(self.intervals, self.nv)
 
     def initial_guess(self) -> np.ndarray:
-        """Straight line in joint space (or a clear detour, see :meth:`_guess_path`), a trapezoidal
+        """Straight line in joint space (or a clear detour, see :mod:`~modular_robots.guess`), a trapezoidal
         velocity profile, ``tf`` from the velocity limits (scaled)."""
         return self._guess.copy()
 
-    def refined(self, substeps: int) -> ShootingProblem:
-        """The same problem with ``substeps`` per interval; decision vectors carry over as they are."""
+    def refined(self, substeps: int | None = None, waypoints: np.ndarray | None = None) -> ShootingProblem:
+        """The same problem with ``substeps`` per interval (decision vectors carry over as they
+        are) or with the initial guess along ``waypoints`` (they do not: the scaling follows the
+        guess)."""
         return ShootingProblem(self.robot, self.q_start, self.q_goal, self.obstacles, self.cost_name,
-                               self.settings, substeps, self.waypoints)
+                               self.settings, substeps or self.substeps,
+                               self.waypoints if waypoints is None else waypoints)
 
     def _configuration(self, q, label) -> np.ndarray:
         q = np.asarray(q, dtype=float).reshape(-1)
@@ -194,36 +195,13 @@ class ShootingProblem:
             raise ValueError(f"{label} = {np.round(q, 6).tolist()} is outside the joint limits")
         return q
 
-    def _guess_path(self) -> np.ndarray:
-        """Joint-space waypoints of the initial guess: the straight line from ``q_start`` to
-        ``q_goal`` if it clears the obstacles, else the fastest clear detour through one seeded
-        random via configuration (a guess through an obstacle lets the solver settle on a motion
-        that jumps through it between two sub-steps; a clear guess starts on the right side)."""
-        straight = np.array([self.q_start, self.q_goal])
-        if self.collision is None or self.collision.path_clear(straight):
-            return straight
-        rng = np.random.default_rng(0)
-        lo = np.where(np.isfinite(self.robot.lower), self.robot.lower, -np.pi)
-        hi = np.where(np.isfinite(self.robot.upper), self.robot.upper, np.pi)
-        best_time, best = np.inf, straight
-        for _ in range(GUESS_TRIALS):
-            path = np.array([self.q_start, rng.uniform(lo, hi), self.q_goal])
-            duration = self._path_time(path).sum()
-            if duration < best_time and self.collision.path_clear(path):
-                best_time, best = duration, path
-        return best
-
-    def _path_time(self, path: np.ndarray) -> np.ndarray:
-        vmax = positive_or_one(self.robot.velocity_limit)
-        return np.max(np.abs(np.diff(path, axis=0)) / vmax, axis=1)
-
     def _initial_motion(self):
         """``tf``, node states and node accelerations of the initial guess: the waypoint path
         walked with a trapezoidal profile (one interval to speed up, one to stop), at a cruise
         speed where the busiest joint moves at its velocity limit."""
         N, nv = self.intervals, self.nv
         path = self.waypoints
-        seg_time = self._path_time(path)
+        seg_time = path_times(self.robot, path)
         total = float(seg_time.sum())
         tf = max(total * N / (N - 1), 1e-2)
         h = tf / N
