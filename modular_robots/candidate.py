@@ -148,6 +148,7 @@ class Candidate:
         self.last: Iterate | None = None
         self._generator: Iterator[Iterate] | None = None
         self._seconds = 0.0
+        self._note = ""
 
     @property
     def seconds(self) -> float:
@@ -171,7 +172,7 @@ class Candidate:
         if self._generator is not None:
             self._generator.close()
         if self.result is None:
-            self._finish("stopped", "closed before convergence", self.problem, None)
+            self._finish("stopped", "closed before convergence" + self._note, None)
 
     def _solve(self, problem: ShootingProblem, y0, offset: int, attempt: int):
         """One solver run, its iterates yielded; returns its outcome."""
@@ -191,29 +192,33 @@ class Candidate:
         return solver.outcome
 
     def _run(self) -> Iterator[Iterate]:
-        problem, y0, offset, verification, note = self.problem, None, 0, None, ""
+        """Solve, swing once if the first solve fails, verify, refine. :attr:`problem` always
+        holds the problem being solved, so that a result taken on :meth:`close` unpacks its
+        ``y`` with the right sub-steps and guess."""
+        y0, offset, verification = None, 0, None
         for attempt in range(self.max_refinements + 1):
-            outcome = yield from self._solve_restarting(problem, y0, offset, attempt)
-            swung = swing_path(problem.robot, problem.collision, problem.waypoints) if (
+            outcome = yield from self._solve_restarting(self.problem, y0, offset, attempt)
+            swung = swing_path(self.problem.robot, self.problem.collision, self.problem.waypoints) if (
                 outcome.status != "optimal" and attempt == 0 and self.swing) else None
             if swung is not None:
-                note = f" (from a swing guess; from the first guess: {outcome.reason})"
+                self._note = f" (from a swing guess; from the first guess: {outcome.reason})"
                 offset = outcome.final.iteration if outcome.final is not None else self._iterations()
-                problem = problem.refined(waypoints=swung)
-                outcome = yield from self._solve_restarting(problem, None, offset, attempt)
+                self.problem = self.problem.refined(waypoints=swung)
+                outcome = yield from self._solve_restarting(self.problem, None, offset, attempt)
             if outcome.status != "optimal":
-                self._finish(outcome.status, outcome.reason + note, problem, None)
+                self._finish(outcome.status, outcome.reason + self._note, None)
                 return
             start = time.perf_counter()
-            previous, verification = verification, verify(problem, outcome.final.y)
+            previous, verification = verification, verify(self.problem, outcome.final.y)
             self._seconds += time.perf_counter() - start
             if verification.passed:
-                self._finish("optimal", outcome.reason + note, problem, verification)
+                self._finish("optimal", outcome.reason + self._note, verification)
                 return
             if attempt == self.max_refinements or _crossing(previous, verification):
                 break
-            problem, y0, offset = problem.refined(2 * problem.substeps), outcome.final.y, outcome.final.iteration
-        self._finish("failed", _verification_failure(verification) + note, problem, verification)
+            self.problem = self.problem.refined(2 * self.problem.substeps)
+            y0, offset = outcome.final.y, outcome.final.iteration
+        self._finish("failed", _verification_failure(verification) + self._note, verification)
 
     def _solve_restarting(self, problem: ShootingProblem, y0, offset: int, attempt: int):
         """:meth:`_solve`, and once more from where it stopped if it hit the iteration limit
@@ -226,15 +231,14 @@ class Candidate:
     def _iterations(self) -> int:
         return self.last.iteration if self.last is not None else 0
 
-    def _finish(self, status: str, reason: str, problem: ShootingProblem, verification: Verification | None):
-        last = self.last
+    def _finish(self, status: str, reason: str, verification: Verification | None):
+        last, problem = self.last, self.problem
         self.result = CandidateResult(
             self.name, problem.nv, status, reason, last.iteration if last else 0, self._seconds,
             last.cost if last else np.nan, last.tf if last else np.nan,
             last.constraint_violation if last else np.nan, tuple(self.history), tuple(self.violations),
             verification, problem.substeps, None, last.y if last else None, problem.cost_bound,
             self.composition, self.boundary_pair, problem.waypoints)
-        self.problem = problem
 
 
 def _crossing(previous: Verification | None, v: Verification) -> bool:

@@ -29,15 +29,16 @@ from .collision import CollisionModel
 from .robot import RobotModel
 from .transcription import positive_or_one
 
-__all__ = ["detour_path", "swing_path", "path_times", "GUESS_TRIALS", "SWING"]
+__all__ = ["detour_path", "swing_path", "path_times", "GUESS_TRIALS", "SWING", "LOADED"]
 
 #: Random via configurations tried when the straight line hits an obstacle.
 GUESS_TRIALS = 48
 
-#: How far [rad] :func:`swing_path` moves the most loaded joint past the loaded end, and the
-#: shorter swing tried when that one does not clear the obstacles.
+#: How far [rad] :func:`swing_path` tries moving the most loaded joint past the loaded end.
 SWING = (1.0, 0.5)
 
+#: Below this share of a joint's torque limit, holding an end still is easy and no swing is tried.
+LOADED = 0.5
 
 def path_times(robot: RobotModel, path: np.ndarray) -> np.ndarray:
     """Seconds each segment of the polyline ``path`` ``(K, nv)`` takes with its busiest joint at
@@ -66,33 +67,47 @@ def detour_path(robot: RobotModel, collision: CollisionModel | None, q_start: np
 
 
 def swing_path(robot: RobotModel, collision: CollisionModel | None, path: np.ndarray,
-               swings: tuple[float, ...] = SWING) -> np.ndarray | None:
+               swings: tuple[float, ...] = SWING, loaded: float = LOADED, samples: int = 12) -> np.ndarray | None:
     """``path`` with one more via next to whichever end needs the larger share of a joint's
-    torque limit to hold still: that end with its most loaded joint moved ``swing`` [rad]
-    towards where its static torque falls, so that the arm arrives there from (or leaves it to)
-    the side of easier holding.
+    torque limit to hold still: that end with its most loaded joint moved by one of ``swings``
+    [rad], either way, so that the arm arrives there from (or leaves it to) the side where
+    holding is easier.
 
-    Returns None when no swing applies: the loaded joint's static torque does not depend on its
-    own position (a prismatic joint), or neither swing stays within the joint limits and clear of
-    the obstacles.
+    A via qualifies when its worst joint needs a smaller share than at the end, no joint needs a
+    larger share than at the end anywhere on the straight segment between them (``samples``
+    points), it stays within the joint limits (a swing clipped to less than half its length
+    does not count) and both segments next to it clear the obstacles. Of those, the one whose worst joint
+    needs the smallest share wins (ties: the longer swing). On the way to a goal, such a via
+    makes the last stretch climb against gravity, so the arm can brake with the torque it has.
+
+    Returns None when no via qualifies, or when neither end needs ``loaded`` of a limit.
     """
     path = np.asarray(path, dtype=float)
-    ends = (path[0], path[-1])
-    ratios = [np.abs(robot.gravity(q)) / positive_or_one(robot.effort_limit) for q in ends]
-    at_goal = int(ratios[1].max() >= ratios[0].max())
-    end = ends[at_goal]
-    joint = int(np.argmax(ratios[at_goal]))
-    torque = robot.gravity(end)[joint]
-    slope = robot.gravity_derivative(end)[joint, joint]
-    if abs(slope) < 1e-9 * max(1.0, abs(torque)):
+    limit = positive_or_one(robot.effort_limit)
+
+    def share(q: np.ndarray) -> float:
+        return float(np.max(np.abs(robot.gravity(q)) / limit))
+
+    at_goal = share(path[-1]) >= share(path[0])
+    end, neighbour = (path[-1], path[-2]) if at_goal else (path[0], path[1])
+    end_share = share(end)
+    if end_share < loaded:
         return None
-    direction = -np.sign(torque * slope)
+    joint = int(np.argmax(np.abs(robot.gravity(end)) / limit))
+    t = np.linspace(0.0, 1.0, samples, endpoint=False)[:, None]
+    best, best_share = None, np.inf
     for swing in swings:
-        via = end.copy()
-        via[joint] = np.clip(end[joint] + direction * swing, robot.lower[joint], robot.upper[joint])
-        if abs(via[joint] - end[joint]) < 0.5 * swing:
-            continue
-        swung = np.vstack([path[:-1], via, path[-1:]]) if at_goal else np.vstack([path[:1], via, path[1:]])
-        if collision is None or collision.path_clear(swung):
-            return swung
-    return None
+        for direction in (1.0, -1.0):
+            via = end.copy()
+            via[joint] = np.clip(end[joint] + direction * swing, robot.lower[joint], robot.upper[joint])
+            if abs(via[joint] - end[joint]) < 0.5 * swing:
+                continue
+            via_share = share(via)
+            if via_share >= min(best_share, (1.0 - 1e-6) * end_share) or max(share(q) for q in via + t * (end - via)) > end_share:
+                continue
+            if collision is not None and not collision.path_clear(np.array([neighbour, via, end])):
+                continue
+            best, best_share = via, via_share
+    if best is None:
+        return None
+    return np.vstack([path[:-1], best, path[-1:]]) if at_goal else np.vstack([path[:1], best, path[1:]])

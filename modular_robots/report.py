@@ -58,7 +58,19 @@ class ResultsFolder:
         return target
 
     def write_winner(self, problem: ShootingProblem, result: CandidateResult, title: str = "") -> dict:
-        """Write ``winner.urdf``, ``trajectory.csv`` and the joints plot; return their names."""
+        """Write ``winner.urdf``, ``trajectory.csv`` and the joints plot; return their names.
+
+        Raises
+        ------
+        ValueError
+            If ``problem`` is not the one ``result.y`` belongs to (other sub-steps or another
+            initial guess, which scales ``y``).
+        """
+        if result.substeps and result.substeps != problem.substeps or (
+                result.waypoints is not None and not np.array_equal(result.waypoints, problem.waypoints)):
+            raise ValueError(f"{result.name}: its decision vector belongs to a problem with {result.substeps} "
+                             "sub-steps and its own initial guess; pass problem.refined(result.substeps, "
+                             "result.waypoints)")
         files = {}
         if problem.robot.urdf is not None:
             _atomic_write(self.file(URDF), problem.robot.urdf)

@@ -183,10 +183,6 @@ class RobotModel:
         """Static joint torques/forces that hold ``q`` against gravity (payload included)."""
         return pin.computeGeneralizedGravity(self.model, self.data, np.asarray(q, dtype=float)).copy()
 
-    def gravity_derivative(self, q) -> np.ndarray:
-        """``d gravity / dq`` at ``q`` ``(nv, nv)``."""
-        return pin.computeGeneralizedGravityDerivatives(self.model, self.data, np.asarray(q, dtype=float)).copy()
-
     def mass_matrix(self, q) -> np.ndarray:
         """Joint-space mass matrix ``M(q)`` (symmetric)."""
         m = pin.crba(self.model, self.data, np.asarray(q, dtype=float))

@@ -17,6 +17,7 @@ from scipy.integrate import solve_ivp
 
 from modular_robots.candidate import Candidate
 from modular_robots.guess import swing_path
+from modular_robots.report import ResultsFolder
 from modular_robots.robot import RobotModel
 from modular_robots.scenario import OptimizerSettings
 from modular_robots.shooting import ShootingProblem
@@ -53,6 +54,28 @@ def test_the_swing_via_lies_past_the_goal_where_holding_is_easier():
     path = swing_path(pendulum(), None, np.array([[Q_START], [Q_GOAL]]))
     assert path.ravel() == pytest.approx([Q_START, Q_GOAL + 1.0, Q_GOAL])
     assert holding_torque(path[1, 0]) < 0.2 * holding_torque(Q_GOAL)
+
+
+def test_a_loaded_start_is_left_through_a_via_next_to_it():
+    path = swing_path(pendulum(), None, np.array([[Q_GOAL], [Q_START]]))
+    assert path.ravel() == pytest.approx([Q_GOAL, Q_GOAL + 1.0, Q_START])
+
+
+def test_a_goal_at_the_largest_holding_torque_swings_to_either_side():
+    """At the horizontal the holding torque is at its maximum, so both sides are easier; the
+    1 rad swings qualify on both and tie, so the via is 1 rad away (below the horizontal)."""
+    robot = pendulum(tau_max=MASS * G0 * ARM / HOLD_SHARE)
+    path = swing_path(robot, None, np.array([[-1.2], [0.0]]))
+    assert abs(path[1, 0]) == pytest.approx(1.0)
+    assert holding_torque(path[1, 0]) < 0.6 * holding_torque(0.0)
+
+
+def test_no_swing_past_the_lowest_holding_torque_and_back_up():
+    """From a goal 1.2 rad below the horizontal a 1 rad swing passes the vertical and climbs to
+    a harder pose (2.2 rad); the 0.5 rad swing (1.7 rad) is the one taken."""
+    robot = pendulum(tau_max=MASS * G0 * ARM * np.cos(1.2) / HOLD_SHARE)
+    path = swing_path(robot, None, np.array([[-1.45], [1.2]]))
+    assert path[1, 0] == pytest.approx(1.7)
 
 
 def test_no_swing_where_the_loaded_joint_cannot_change_its_own_holding_torque():
@@ -102,3 +125,28 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
     assert x[0] == pytest.approx(Q_GOAL, abs=1e-3) and abs(x[1]) < 1e-2
     assert max(qs) > Q_GOAL + 0.05
     assert max(abs(t) for t in taus) <= TAU_MAX * (1.0 + 1e-3)
+
+
+def test_a_candidate_closed_during_its_swing_solve_records_the_swing_problem(tmp_path):
+    """``y`` is scaled by the initial guess's ``tf``, so a result taken mid-swing must carry the
+    swing's waypoints; exporting it against the first problem is refused."""
+    problem = ShootingProblem(pendulum(), [Q_START], [Q_GOAL], settings=OptimizerSettings(max_iterations=100))
+    candidate = Candidate(problem)
+    swinging = 0
+    for _ in candidate.iterate():
+        swinging += len(candidate.problem.waypoints) == 3
+        if swinging == 4:
+            break
+    candidate.close()
+    result = candidate.result
+    assert result.status == "stopped" and "from a swing guess" in result.reason
+    assert result.waypoints.ravel() == pytest.approx([Q_START, Q_GOAL + 1.0, Q_GOAL])
+    swung = problem.refined(result.substeps, result.waypoints)
+    assert swung.unpack(result.y)[0] == pytest.approx(result.tf, rel=1e-12)
+    assert problem.unpack(result.y)[0] != pytest.approx(result.tf, rel=1e-3)
+    folder = ResultsFolder(tmp_path)
+    with pytest.raises(ValueError, match="pendulum: its decision vector belongs to a problem with 4 sub-steps "
+                                         "and its own initial guess"):
+        folder.write_winner(problem, result)
+    trajectory = np.loadtxt(tmp_path / folder.write_winner(swung, result)["trajectory"], delimiter=",", skiprows=1)
+    assert trajectory[-1, 0] == pytest.approx(result.tf, rel=1e-8)

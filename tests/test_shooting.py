@@ -405,7 +405,7 @@ def test_obstacle_on_the_straight_line_is_avoided(transcription, guess):
     assert check.passed, check
     assert check.min_clearance >= 0.0
     # Open-loop replay with the closed-form dynamics and distance (no Pinocchio, no FCL).
-    q, v, final = replay_arm(problem.refined(result.substeps), result.y)
+    q, v, final = replay_arm(problem.refined(result.substeps, result.waypoints), result.y)
     assert min(arm_clearance(qk, ARM_OBSTACLE) for qk in q) >= 0.0
     assert np.linalg.norm(arm_points(final[:2])[2] - arm_points(ARM_GOAL)[2]) <= 0.01
     assert np.all(np.abs(v) <= ARM_VEL * (1.0 + 2e-3))
@@ -675,6 +675,6 @@ def test_refinement_doubles_substeps_until_the_motion_verifies():
     assert result.status == "optimal", result.reason
     assert result.substeps > 1
     assert result.verification.passed and result.verification.substeps == result.substeps
-    q, v, end = replay_arm(coarse_problem.refined(result.substeps), result.y)
+    q, v, end = replay_arm(coarse_problem.refined(result.substeps, result.waypoints), result.y)
     assert np.linalg.norm(arm_points(end[:2])[2] - arm_points(ARM_GOAL)[2]) <= 0.01
     assert np.all(np.abs(v) <= ARM_VEL * (1.0 + 2e-3))
