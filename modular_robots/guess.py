@@ -76,8 +76,8 @@ def swing_path(robot: RobotModel, collision: CollisionModel | None, path: np.nda
     A via qualifies when its worst joint needs a smaller share than at the end, no joint needs a
     larger share than at the end anywhere on the straight segment between them (``samples``
     points), it stays within the joint limits (a swing clipped to less than half its length
-    does not count) and both segments next to it clear the obstacles. Of those, the one whose worst joint
-    needs the smallest share wins (ties: the longer swing). On the way to a goal, such a via
+    does not count) and both segments next to it clear the obstacles. Of those, the one whose
+    worst joint needs the smallest share wins (ties: the longer swing). On the way to a goal, such a via
     makes the last stretch climb against gravity, so the arm can brake with the torque it has.
 
     Returns None when no via qualifies, or when neither end needs ``loaded`` of a limit.
@@ -103,7 +103,9 @@ def swing_path(robot: RobotModel, collision: CollisionModel | None, path: np.nda
             if abs(via[joint] - end[joint]) < 0.5 * swing:
                 continue
             via_share = share(via)
-            if via_share >= min(best_share, (1.0 - 1e-6) * end_share) or max(share(q) for q in via + t * (end - via)) > end_share:
+            if via_share >= min(best_share, (1.0 - 1e-6) * end_share):
+                continue
+            if max(share(q) for q in via + t * (end - via)) > end_share:
                 continue
             if collision is not None and not collision.path_clear(np.array([neighbour, via, end])):
                 continue
