@@ -202,7 +202,7 @@ class Candidate:
                 outcome.status != "optimal" and attempt == 0 and self.swing) else None
             if swung is not None:
                 self._note = f" (from a swing guess; from the first guess: {outcome.reason})"
-                offset = outcome.final.iteration if outcome.final is not None else self._iterations()
+                offset = self.last.iteration if self.last is not None else 0
                 self.problem = self.problem.refined(waypoints=swung)
                 outcome = yield from self._solve_restarting(self.problem, None, offset, attempt)
             if outcome.status != "optimal":
@@ -227,9 +227,6 @@ class Candidate:
         if outcome.limit_reached and self.restart and outcome.final is not None:
             outcome = yield from self._solve(problem, outcome.final.y, outcome.final.iteration, attempt)
         return outcome
-
-    def _iterations(self) -> int:
-        return self.last.iteration if self.last is not None else 0
 
     def _finish(self, status: str, reason: str, verification: Verification | None):
         last, problem = self.last, self.problem

@@ -160,9 +160,9 @@ class _Check:
 
 
 def _torque_check(robot: RobotModel, q: np.ndarray, label: str) -> _Check:
-    torque = np.abs(robot.gravity(q))
-    ratios = torque / robot.effort_limit
+    ratios = robot.holding_ratios(q)
     worst = int(np.argmax(ratios))
+    torque = ratios * robot.effort_limit
     unit = "N" if robot.model.joints[worst + 1].shortname() == "JointModelPZ" else "N m"
     message = (f"static torque {torque[worst]:.4g} {unit} > {robot.effort_limit[worst]:.4g} {unit} "
                f"(joint {worst + 1}, {label})")

@@ -83,17 +83,17 @@ def swing_path(robot: RobotModel, collision: CollisionModel | None, path: np.nda
     Returns None when no via qualifies, or when neither end needs ``loaded`` of a limit.
     """
     path = np.asarray(path, dtype=float)
-    limit = positive_or_one(robot.effort_limit)
 
     def share(q: np.ndarray) -> float:
-        return float(np.max(np.abs(robot.gravity(q)) / limit))
+        return float(np.max(robot.holding_ratios(q)))
 
-    at_goal = share(path[-1]) >= share(path[0])
+    ends = [robot.holding_ratios(path[0]), robot.holding_ratios(path[-1])]
+    at_goal = int(ends[1].max() >= ends[0].max())
     end, neighbour = (path[-1], path[-2]) if at_goal else (path[0], path[1])
-    end_share = share(end)
+    end_share = float(ends[at_goal].max())
     if end_share < loaded:
         return None
-    joint = int(np.argmax(np.abs(robot.gravity(end)) / limit))
+    joint = int(np.argmax(ends[at_goal]))
     t = np.linspace(0.0, 1.0, samples, endpoint=False)[:, None]
     best, best_share = None, np.inf
     for swing in swings:

@@ -183,6 +183,12 @@ class RobotModel:
         """Static joint torques/forces that hold ``q`` against gravity (payload included)."""
         return pin.computeGeneralizedGravity(self.model, self.data, np.asarray(q, dtype=float)).copy()
 
+    def holding_ratios(self, q) -> np.ndarray:
+        """``|gravity(q)|`` over each joint's effort limit: above 1, the joint cannot hold ``q``
+        (a joint without a positive finite limit is measured against 1)."""
+        limit = self.effort_limit
+        return np.abs(self.gravity(q)) / np.where(np.isfinite(limit) & (limit > 0.0), limit, 1.0)
+
     def mass_matrix(self, q) -> np.ndarray:
         """Joint-space mass matrix ``M(q)`` (symmetric)."""
         m = pin.crba(self.model, self.data, np.asarray(q, dtype=float))
