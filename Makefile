@@ -19,7 +19,9 @@ run: install
 	$(VENV)/bin/modular-robots run scenarios/paper-5kg.yaml --out results/paper-5kg
 	@echo "results: $(CURDIR)/results/paper-5kg/ (result.json, winner.urdf, trajectory.csv, joints.png, pruning.png)"
 
+# Import layers first (seconds), then the tests.
 test: install
+	$(VENV)/bin/lint-imports
 	$(PY) -m pytest -q
 
 bench: install

@@ -1,13 +1,19 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
-runs only those (models, feasibility, ocp, pruning). RESULTS.md is rewritten at the end."""
+runs only those (models, feasibility, ocp, pruning). RESULTS.md is rewritten at the end.
+
+Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
+timed here is the solve a run does."""
 
 import sys
+
+from modular_robots.execution import single_threaded_blas
 
 from . import bench_feasibility, bench_models, bench_ocp, bench_pruning, results_md
 
 BENCHES = {"models": bench_models, "feasibility": bench_feasibility, "ocp": bench_ocp, "pruning": bench_pruning}
 
-for name in sys.argv[1:] or list(BENCHES):
-    print(f"== {name} ==")
-    BENCHES[name].main()
+with single_threaded_blas():
+    for name in sys.argv[1:] or list(BENCHES):
+        print(f"== {name} ==")
+        BENCHES[name].main()
 results_md.main()

@@ -14,13 +14,14 @@ import numpy as np
 import pinocchio as pin
 
 from modular_robots import load_scenario
-from modular_robots.pipeline import CandidateSpec, candidate_specs, make_candidate
+from modular_robots.ocp.candidate import CandidateSpec, make_candidate
+from modular_robots.pipeline import candidate_specs
 from modular_robots.execution import ProcessEngine, available_cores
 from modular_robots.feasibility import filter_compositions
 from modular_robots.robot import RobotModel
 from modular_robots.scenario import OptimizerSettings
-from modular_robots.shooting import ShootingProblem
-from modular_robots.solver import ShootingSolver
+from modular_robots.ocp.shooting import ShootingProblem
+from modular_robots.ocp.solver import ShootingSolver
 
 from ._common import table, write
 
@@ -96,14 +97,14 @@ def main() -> None:
     rows = []
     for verdict in chosen:
         name, dof = verdict.composition.name, verdict.composition.dof
-        spec = CandidateSpec(verdict)
+        spec = CandidateSpec(verdict.composition, verdict.q_start, verdict.q_goal)
         rows.append(_row(name, dof, "inverse", [_solve(scenario, spec, "inverse") for _ in range(REPEATS)]))
         rows.append(_row(name, dof, "forward", [_solve(scenario, spec, "forward")]))
     print(table(rows))
 
     share = {}
     for transcription, specs in (("inverse", list(candidate_specs(survivors))),
-                                 ("forward", [CandidateSpec(v) for v in chosen])):
+                                 ("forward", [CandidateSpec(v.composition, v.q_start, v.q_goal) for v in chosen])):
         engine = ProcessEngine(available_cores())
         start = time.perf_counter()
         outcomes = list(engine.map_chunks(_converge_chunk, (scenario, transcription), specs, chunksize=1))

@@ -13,7 +13,8 @@ import numpy as np
 from modular_robots import load_scenario
 from modular_robots.pipeline import run_scenario, with_pruning
 from modular_robots.pruning import PruningManager
-from modular_robots.solver import Iterate
+from modular_robots.ocp.candidate import CandidateStatus
+from modular_robots.ocp.solver import Iterate
 
 from ._common import table, write
 
@@ -61,14 +62,14 @@ class _Replay:
             r, k = self.results[name], self.step[name]
             if k < len(r.cost_history):
                 self.step[name] = k + 1
-                out[name] = Iterate(k + 1, r.cost_history[k], r.violation_history[k], r.cost_history[k], np.empty(0),
-                                    cost_bound=r.cost_bound)
+                out[name] = (False, Iterate(k + 1, r.cost_history[k], r.violation_history[k], r.cost_history[k],
+                                            np.empty(0), cost_bound=r.cost_bound))
             else:
-                out[name] = r
+                out[name] = (True, r)
         return out
 
     def stop(self, names):
-        return {n: replace(self.results[n], status="stopped", iterations=self.step[n]) for n in names}
+        return {n: replace(self.results[n], status=CandidateStatus.STOPPED, iterations=self.step[n]) for n in names}
 
     def shutdown(self):
         pass

@@ -11,13 +11,13 @@ from pathlib import Path
 
 import click
 
-from .candidate import BOUNDARY_PAIRS
 from .composition import Composition, count_compositions, enumerate_compositions
-from .exceptions import InfeasibleError, ModularRobotsError
+from .exceptions import ModularRobotsError
 from .execution import make_engine
-from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, check_composition, filter_compositions
-from .pipeline import candidate_specs, make_candidate, run_scenario, with_pruning
-from .report import RESULT, ResultsFolder, result_document, settings_json, winner_json
+from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, filter_compositions
+from .ocp.candidate import BoundaryPair
+from .pipeline import optimize_composition, run_scenario, with_pruning
+from .recorder import RESULT
 from .scenario import RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
 
@@ -140,73 +140,23 @@ def optimize_command(composition: str, scenario_path: Path, out: Path, transcrip
     scenario = load_scenario(scenario_path)
     overrides = {k: v for k, v in (("transcription", transcription), ("max_iterations", max_iterations)) if v}
     scenario = replace(scenario, optimizer=replace(scenario.optimizer, **overrides))
-    name, _, only = composition.partition("+")
-    if only and only not in BOUNDARY_PAIRS:
-        raise click.BadParameter(f"{composition!r}: the suffix after '+' must be one of {', '.join(BOUNDARY_PAIRS)}",
-                                 param_hint="COMPOSITION")
-    chain = Composition.from_name(name, scenario.catalog)
-    start = time.perf_counter()
-    verdict = check_composition(chain, scenario.catalog, scenario.task)
-    feasibility_seconds = time.perf_counter() - start
-    if not verdict.passed:
-        raise InfeasibleError(f"{chain.name} cannot do the task: {verdict.message}")
-    specs = [s for s in candidate_specs([verdict]) if not only or s.boundary_pair == only]
-    if not specs:
-        raise click.ClickException(f"{chain.name} has no clear boundary pair: the straight line of its fastest "
-                                   "pair already clears the obstacles, or no pair's line does")
-    candidates = [make_candidate(scenario, spec) for spec in specs]
-    folder = ResultsFolder(out)
-    counts = {"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates), "pruned": 0}
+    with _LiveLine() as live:
+        def progress(name, it):
+            live.show(f"{name}: iteration {it.iteration}  {scenario.task.cost} {it.cost:.4g}  "
+                      f"tf {it.tf:.3f} s  violation {it.constraint_violation:.1e}")
 
-    def document(status, partial, winner=None, message=""):
-        results = [c.result for c in candidates if c.result]
-        return result_document(scenario, settings_json(scenario, rule="single composition"), counts,
-                               {"feasibility": feasibility_seconds,
-                                "optimization": sum(c.seconds for c in candidates)},
-                               results, winner, time.perf_counter() - start, partial, status, message)
-
-    def best():
-        optimal = [c for c in candidates if c.result is not None and c.result.status == "optimal"]
-        return min(optimal, key=lambda c: c.result.cost) if optimal else None
-
-    folder.write_result(document("running", True))
-    try:
-        with _LiveLine() as live:
-            for candidate in candidates:
-                for it in candidate.iterate():
-                    live.show(f"{candidate.name}: iteration {it.iteration}  {scenario.task.cost} {it.cost:.4g}  "
-                              f"tf {it.tf:.3f} s  violation {it.constraint_violation:.1e}")
-                folder.write_result(document("running", True))
-    except KeyboardInterrupt:
-        for candidate in candidates:
-            candidate.close()
-        done = best()
-        winner = winner_json(done.result, folder.write_winner(done.problem, done.result)) if done else None
-        folder.write_result(document("interrupted", True, winner, "interrupted by the user" + (
-            f"; {done.name} had already verified and is written as the winner so far" if done else "")))
-        raise
-    finally:
-        for candidate in candidates:
-            if candidate.result is None:
-                candidate.close()
-    done = best()
-    if done is None:
-        reason = "; ".join(f"{c.name}: {c.result.reason}" for c in candidates)
-        folder.write_result(document("failed", False, message=reason))
-        raise click.ClickException(f"{reason} (see {folder.file(RESULT)})")
-    result = done.result
-    files = folder.write_winner(done.problem, result)
-    folder.write_result(document("done", False, winner_json(result, files)))
+        run = optimize_composition(scenario, composition, out, on_iterate=progress)
+    result = run.winner
+    for other in run.candidates:
+        if other is not result:
+            click.echo(f"{other.name}: {other.status}, cost {other.cost:.4g}, {other.iterations} iterations, "
+                       f"{other.seconds:.2f} s", err=True)
     v = result.verification
-    for candidate in candidates:
-        if candidate is not done:
-            click.echo(f"{candidate.name}: {candidate.result.status}, cost {candidate.result.cost:.4g}, "
-                       f"{candidate.result.iterations} iterations, {candidate.result.seconds:.2f} s", err=True)
     click.echo(f"{result.name}: tf = {result.tf:.4f} s, cost {result.cost:.4g}, {result.iterations} iterations, "
                f"{result.seconds:.2f} s, {result.substeps} sub-steps per interval")
     click.echo(f"verified: terminal error {v.terminal_error * 1000:.3f} mm, min clearance {v.min_clearance:.4f} m, "
                f"velocity {v.velocity_ratio:.3f} x limit, torque {v.torque_ratio:.3f} x limit")
-    click.echo(f"wrote {', '.join(str(folder.file(f)) for f in [RESULT, *files.values()])}")
+    click.echo(f"wrote {_written(out)}")
 
 
 @main.command("run")
@@ -239,7 +189,14 @@ def run_command(scenario_path: Path, out: Path | None, rule: str | None, thresho
 
         result = run_scenario(scenario, out, jobs, on_progress=progress)
     click.echo(_run_table(result, scenario))
-    click.echo(f"wrote {out}/ (result.json, winner.urdf, trajectory.csv, joints.png, pruning.png)")
+    click.echo(f"wrote {_written(out)}")
+
+
+def _written(out: Path) -> str:
+    """The files of the results folder ``out``, as its ``result.json`` lists them."""
+    document = json.loads((out / RESULT).read_text())
+    files = (document.get("winner") or {}).get("files", {})
+    return f"{out}/ ({', '.join([RESULT, *files.values()])})"
 
 
 def _run_table(result, scenario) -> str:
@@ -247,7 +204,7 @@ def _run_table(result, scenario) -> str:
     statuses = [c.status for c in result.candidates]
     v = w.verification
     rows = [
-        ("winner", w.composition + ("" if w.boundary_pair == "fastest" else f" (from its {w.boundary_pair} "
+        ("winner", w.composition + ("" if w.boundary_pair == BoundaryPair.FASTEST else f" (from its {w.boundary_pair} "
                                                                               "boundary pair)")),
         ("tf [s]", f"{w.tf:.4f}"),
         (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
@@ -255,7 +212,7 @@ def _run_table(result, scenario) -> str:
                          f"{v.min_clearance:.4f} m, {w.substeps} sub-steps"),
         ("compositions", f"{result.feasibility.checked} enumerated, {len(result.feasibility.survivors)} feasible"),
         ("candidates", f"{len(statuses)} optimised ({len(result.feasibility.survivors)} compositions, "
-                       f"{sum(c.boundary_pair == 'clear' for c in result.candidates)} also from a clear pair): "
+                       f"{sum(c.boundary_pair == BoundaryPair.CLEAR for c in result.candidates)} also from a clear pair): "
                        f"{statuses.count('optimal')} optimal, "
                        f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed"),
         ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),

@@ -14,20 +14,13 @@ import numpy as np
 import pinocchio as pin
 
 from .robot import RobotModel
+from .scenario import SphereObstacle
 
-__all__ = ["SphereObstacle", "CollisionModel", "Distances", "PATH_CLEARANCE", "penetration"]
+__all__ = ["CollisionModel", "Distances", "PATH_CLEARANCE", "penetration"]
 
 #: Clearance a joint-space path must keep from every obstacle to count as clear [m] (step C's
 #: initial guess).
 PATH_CLEARANCE = 0.02
-
-
-@dataclass(frozen=True)
-class SphereObstacle:
-    """A sphere obstacle: ``center`` in the base frame [m], ``radius`` [m]."""
-
-    center: tuple[float, float, float]
-    radius: float
 
 
 @dataclass(frozen=True)

@@ -1,25 +1,70 @@
-"""Where work runs: in this process or on a pool of worker processes.
+"""Where work runs: in this process or on worker processes. Nothing here decides anything.
 
-Both engines map a function over a stream of items in chunks and yield the results in input
-order, with a bounded number of chunks in flight (memory stays bounded however long the
-stream). A distributed engine (e.g. Ray) only has to provide :meth:`Engine.map_chunks`.
+Two kinds of work, each with a serial and a process implementation:
+
+* **Engines** map a function over a stream of items in chunks and yield the results in input
+  order, with a bounded number of chunks in flight (memory stays bounded however long the
+  stream): step B's cascade.
+* **Executors** host long-lived iterative jobs (step C's candidates: objects with ``iterate()``,
+  ``close()`` and ``result``) and advance each by one step on command, so the pruning manager can
+  run them in lockstep wherever they live.
+
+A distributed engine (e.g. Ray) plugs in here: an :class:`Engine` only has to provide
+:meth:`Engine.map_chunks` and an :class:`Executor` its four methods.
+
+Our matrices are small (tens to hundreds of unknowns) and every core already runs a worker, so
+multithreaded BLAS only adds synchronisation (one profiled solve on 2 busy cores: 19.9 s with
+OpenBLAS threads, 13.5 s with one). Every worker, and every in-process run, therefore limits BLAS
+to one thread (:func:`single_threaded_blas`); this also makes ``jobs = 1`` and ``jobs = N``
+compute bit for bit the same.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+import multiprocessing
 import os
+import signal
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Protocol, TypeVar
 
-__all__ = ["Engine", "SerialEngine", "ProcessEngine", "make_engine", "available_cores"]
+from threadpoolctl import threadpool_limits
+
+from .exceptions import ModularRobotsError
+
+__all__ = [
+    "Engine",
+    "SerialEngine",
+    "ProcessEngine",
+    "make_engine",
+    "available_cores",
+    "Executor",
+    "InProcessExecutor",
+    "ProcessExecutor",
+    "make_executor",
+    "single_threaded_blas",
+]
 
 T = TypeVar("T")
 R = TypeVar("R")
 
 
+def single_threaded_blas() -> contextlib.AbstractContextManager:
+    """A context in which BLAS (and OpenMP) use one thread (see the module docstring)."""
+    return threadpool_limits(limits=1)
+
+
+def available_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+# -- engines: map a function over a stream -------------------------------------------------------
 class Engine(Protocol):
     """Runs ``work(context, chunk)`` over chunks of ``items``; results come back in order."""
 
@@ -28,13 +73,6 @@ class Engine(Protocol):
     def map_chunks(
         self, work: Callable[[Any, list[T]], list[R]], context: Any, items: Iterable[T], chunksize: int = 16
     ) -> Iterator[R]: ...
-
-
-def available_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def _chunks(items: Iterable[T], size: int) -> Iterator[list[T]]:
@@ -50,15 +88,18 @@ class SerialEngine:
 
     def map_chunks(self, work, context, items, chunksize=16):
         for chunk in _chunks(items, chunksize):
-            yield from work(context, chunk)
+            with single_threaded_blas():
+                results = work(context, chunk)
+            yield from results
 
 
 _CONTEXT: Any = None
 
 
-def _set_context(context: Any) -> None:
+def _start_worker(context: Any) -> None:
     global _CONTEXT
     _CONTEXT = context
+    threadpool_limits(limits=1)
 
 
 def _run_in_worker(work: Callable, chunk: list) -> list:
@@ -76,7 +117,7 @@ class ProcessEngine:
         self.window = window
 
     def map_chunks(self, work, context, items, chunksize=16):
-        with ProcessPoolExecutor(self.jobs, initializer=_set_context, initargs=(context,)) as pool:
+        with ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(context,)) as pool:
             pending: deque = deque()
             try:
                 for chunk in _chunks(items, chunksize):
@@ -94,3 +135,172 @@ def make_engine(jobs: int | None = None) -> Engine:
     """``jobs`` = 1: :class:`SerialEngine`; ``None`` or 0: every available core."""
     jobs = jobs or available_cores()
     return SerialEngine() if jobs == 1 else ProcessEngine(jobs)
+
+
+# -- executors: advance long-lived jobs in lockstep ----------------------------------------------
+class Executor(Protocol):
+    """Hosts named jobs and advances them on command, one step each.
+
+    A job is built by ``factory(context, spec)`` when first advanced and has ``iterate()`` (a
+    generator of steps), ``close()`` and ``result`` (set once it has ended or been closed).
+    """
+
+    def names(self) -> list[str]: ...
+
+    def advance(self, names: Sequence[str]) -> dict[str, tuple[bool, Any]]:
+        """One step of each named job: ``(False, step)``, or ``(True, result)`` if it ended.
+
+        Raises :class:`~modular_robots.exceptions.ModularRobotsError` if a worker died."""
+        ...
+
+    def stop(self, names: Sequence[str]) -> dict[str, Any]:
+        """Close the named jobs and return their results (None for a job that never started or
+        whose worker died)."""
+        ...
+
+    def shutdown(self) -> None: ...
+
+
+class InProcessExecutor:
+    """The jobs as generators in this process."""
+
+    def __init__(self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any],
+                 names: Sequence[str]):
+        self._names = list(names)
+        self._pending = dict(zip(self._names, specs))
+        self._factory, self._context = factory, context
+        self._jobs: dict[str, Any] = {}
+        self._iterators: dict[str, Iterator] = {}
+
+    def names(self) -> list[str]:
+        return list(self._names)
+
+    def advance(self, names):
+        out = {}
+        with single_threaded_blas():
+            for name in names:
+                if name not in self._jobs:
+                    job = self._factory(self._context, self._pending.pop(name))
+                    self._jobs[name] = job
+                    self._iterators[name] = job.iterate()
+                try:
+                    out[name] = (False, next(self._iterators[name]))
+                except StopIteration:
+                    out[name] = (True, self._jobs[name].result)
+        return out
+
+    def stop(self, names):
+        out = {}
+        for name in names:
+            job = self._jobs.get(name)
+            if job is not None:
+                job.close()
+            out[name] = job.result if job is not None else None
+        return out
+
+    def shutdown(self) -> None:
+        for job in self._jobs.values():
+            if job.result is None:
+                job.close()
+
+
+def _worker(conn, factory, context, specs, names) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop (Ctrl-C)
+    threadpool_limits(limits=1)
+    executor = InProcessExecutor(factory, context, specs, names)
+    try:
+        while True:
+            command, names = conn.recv()
+            if command == "advance":
+                conn.send(executor.advance(names))
+            elif command == "stop":
+                conn.send(executor.stop(names))
+            else:
+                break
+    except (EOFError, KeyboardInterrupt):
+        pass
+    finally:
+        executor.shutdown()
+        conn.close()
+
+
+class ProcessExecutor:
+    """Worker processes that each host a fixed share of the jobs (round robin) and advance them on
+    command, so the lockstep, and every decision taken on it, does not depend on the number of
+    workers."""
+
+    def __init__(self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any],
+                 names: Sequence[str], jobs: int):
+        self._names = list(names)
+        jobs = max(1, min(jobs, len(self._names)))
+        ctx = multiprocessing.get_context()
+        self._owner = {name: i % jobs for i, name in enumerate(self._names)}
+        self._conns, self._procs = [], []
+        self._awaiting: set[int] = set()
+        for w in range(jobs):
+            mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
+            parent, child = ctx.Pipe()
+            proc = ctx.Process(target=_worker, args=(child, factory, context, [specs[i] for i in mine],
+                                                     [self._names[i] for i in mine]), daemon=True)
+            proc.start()
+            child.close()
+            self._conns.append(parent)
+            self._procs.append(proc)
+
+    def names(self) -> list[str]:
+        return list(self._names)
+
+    def _command(self, command: str, names, tolerate_dead: bool = False) -> dict:
+        by_worker: dict[int, list[str]] = {}
+        for name in names:
+            by_worker.setdefault(self._owner[name], []).append(name)
+        out = {}
+        for w, mine in by_worker.items():
+            try:
+                if w in self._awaiting:  # a reply left unread by an interruption
+                    self._conns[w].recv()
+                    self._awaiting.discard(w)
+                self._conns[w].send((command, mine))
+                self._awaiting.add(w)
+            except (EOFError, OSError) as exc:
+                if not tolerate_dead:
+                    raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
+                out.update(dict.fromkeys(mine))
+        for w in by_worker:
+            if w not in self._awaiting:
+                continue
+            try:
+                out.update(self._conns[w].recv())
+                self._awaiting.discard(w)
+            except (EOFError, OSError) as exc:
+                self._awaiting.discard(w)
+                if not tolerate_dead:
+                    raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
+                out.update(dict.fromkeys(by_worker[w]))
+        return out
+
+    def advance(self, names):
+        return self._command("advance", names)
+
+    def stop(self, names):
+        return self._command("stop", names, tolerate_dead=True)
+
+    def shutdown(self) -> None:
+        for conn in self._conns:
+            try:
+                conn.send(("exit", []))
+            except (BrokenPipeError, OSError):
+                pass
+        for proc in self._procs:
+            proc.join(timeout=10)
+            if proc.is_alive():
+                proc.terminate()
+
+
+def make_executor(factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any], names: Sequence[str],
+                  jobs: int | None = None) -> Executor:
+    """``jobs`` = 1: :class:`InProcessExecutor`; ``None`` or 0: a worker process per core."""
+    jobs = jobs or available_cores()
+    if jobs == 1:
+        return InProcessExecutor(factory, context, specs, names)
+    return ProcessExecutor(factory, context, specs, names, jobs)

@@ -289,7 +289,7 @@ def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals):
     (None otherwise).
 
     Step C optimises from both pairs, as two candidates (see
-    :func:`~modular_robots.candidate.composition_problem` for why neither alone suffices). Joint
+    :func:`~modular_robots.ocp.candidate.composition_problem` for why neither alone suffices). Joint
     limits of the paper catalogue do not allow wrapping through +-pi, so the shortest way within
     limits is the plain difference.
     """
@@ -351,6 +351,11 @@ class FeasibilitySummary:
         if verdict.failed_test == INVERSE_KINEMATICS.name and figure["ik_error"] < self.smallest_ik_error:
             self.smallest_ik_error = figure["ik_error"]
             self.smallest_ik_miss = f"{verdict.composition.name}: {verdict.message}"
+
+    def counts(self) -> dict:
+        """The step-B block of ``result.json``'s ``counts``."""
+        return {"enumerated": self.checked, "removed": dict(self.removed), "remaining_after": self.remaining_after(),
+                "feasible": len(self.survivors)}
 
     def remaining_after(self) -> dict[str, int]:
         left, out = self.checked, {}

@@ -1,5 +1,11 @@
 """Steps A to E in one call: from a scenario to the best composition, its trajectory and the
-results folder (SPEC §2, §7). The ``run`` command is a thin shell over :func:`run_scenario`.
+results folder (SPEC §2, §7). The ``run`` and ``optimize`` commands are thin shells over
+:func:`run_scenario` and :func:`optimize_composition`.
+
+Data flows one way: step B's verdicts become :class:`~modular_robots.ocp.candidate.CandidateSpec`
+values (a composition and its boundary states), step C turns each into a
+:class:`~modular_robots.ocp.candidate.CandidateResult` that carries its sampled trajectory, and
+the :class:`~modular_robots.recorder.RunRecorder` writes what it is given.
 """
 
 from __future__ import annotations
@@ -10,24 +16,26 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from .candidate import BOUNDARY_PAIRS, Candidate, CandidateResult, composition_problem
-from .exceptions import InfeasibleError
-from .execution import make_engine
-from .feasibility import FeasibilitySettings, FeasibilitySummary, Verdict, filter_compositions
-from .pruning import InProcessExecutor, ProcessExecutor, Progress, PruningManager
-from .report import (PRUNING_PLOT, ResultsFolder, plot_pruning_history, result_document, settings_json,
-                     winner_json)
+from .composition import Composition
+from .exceptions import CompositionError, InfeasibleError
+from .execution import make_engine, make_executor, single_threaded_blas
+from .feasibility import FeasibilitySettings, FeasibilitySummary, Verdict, check_composition, filter_compositions
+from .ocp.candidate import BoundaryPair, CandidateResult, CandidateSpec, CandidateStatus, make_candidate
+from .ocp.solver import Iterate
+from .pruning import Progress, PruningManager
+from .recorder import RunRecorder
 from .scenario import Scenario
 
-__all__ = ["CandidateSpec", "RunResult", "candidate_specs", "run_scenario", "make_candidate", "with_pruning"]
+__all__ = ["RunResult", "candidate_specs", "optimize_composition", "run_scenario", "with_pruning"]
 
 logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class RunResult:
-    """The outcome of :func:`run_scenario`: every optimised candidate, the winner's result, the
-    feasibility summary, round count and wall seconds per stage."""
+    """The outcome of :func:`run_scenario` (or :func:`optimize_composition`): every optimised
+    candidate, the winner's result, the feasibility summary, round count and wall seconds per
+    stage."""
 
     candidates: tuple[CandidateResult, ...]
     winner: CandidateResult
@@ -40,36 +48,25 @@ class RunResult:
         return sum(c.iterations for c in self.candidates)
 
 
-@dataclass(frozen=True)
-class CandidateSpec:
-    """A step-C candidate to build: a step-B survivor and the boundary pair it starts from."""
-
-    verdict: Verdict
-    boundary_pair: str = "fastest"
-
-    @property
-    def name(self) -> str:
-        """The composition's name, suffixed ``+clear`` for its clear boundary pair."""
-        name = self.verdict.composition.name
-        return name if self.boundary_pair == "fastest" else f"{name}+{self.boundary_pair}"
-
-
 def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
-    """Every candidate of the survivors: one per boundary pair step B offers (the fastest, and the
-    fastest clear one when that is another pair; see
-    :func:`~modular_robots.candidate.composition_problem`)."""
+    """Every step-C candidate of step B's survivors: one per boundary pair a verdict offers (the
+    fastest, and the fastest clear one when that is another pair; see
+    :func:`~modular_robots.ocp.candidate.make_candidate`)."""
     for verdict in survivors:
-        yield CandidateSpec(verdict, BOUNDARY_PAIRS[0])
+        yield CandidateSpec(verdict.composition, verdict.q_start, verdict.q_goal, BoundaryPair.FASTEST)
         if verdict.clear_pair is not None:
-            yield CandidateSpec(verdict, BOUNDARY_PAIRS[1])
+            yield CandidateSpec(verdict.composition, *verdict.clear_pair, BoundaryPair.CLEAR)
 
 
-def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:
-    """The step-C candidate of ``spec`` (the picklable entry point for worker processes)."""
-    composition = spec.verdict.composition
-    problem = composition_problem(composition, scenario.catalog, scenario.task, scenario.optimizer, spec.verdict,
-                                  boundary_pair=spec.boundary_pair)
-    return Candidate(problem, spec.name, composition=composition.name, boundary_pair=spec.boundary_pair)
+def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
+    optimal = [r for r in results if r.status == CandidateStatus.OPTIMAL]
+    return min(optimal, key=lambda r: (r.cost, r.name)) if optimal else None
+
+
+def _status_counts(results: Iterable[CandidateResult]) -> dict[str, int]:
+    statuses = [r.status for r in results]
+    return {str(s): statuses.count(s) for s in (CandidateStatus.PRUNED, CandidateStatus.FAILED,
+                                                  CandidateStatus.OPTIMAL)}
 
 
 def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | None = None,
@@ -95,112 +92,136 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
         then says why.
     """
     notify = on_progress or (lambda stage, figures: None)
-    folder = ResultsFolder(out) if out is not None else None
-    start = time.perf_counter()
     engine = make_engine(jobs)
     summary = FeasibilitySummary()
-    seconds: dict[str, float] = {}
-    manager: PruningManager | None = None
-    specs: list[CandidateSpec] = []
-    state = {"status": "running", "message": ""}
-
-    def counts() -> dict:
-        remaining = summary.remaining_after()
-        out_counts = {"enumerated": summary.checked,
-                      "removed": dict(summary.removed), "remaining_after": remaining,
-                      "feasible": len(summary.survivors)}
-        if manager is not None:
-            results = list(manager.results.values())
-            out_counts.update({"optimized": len(summary.survivors), "candidates": len(specs),
-                               "pruned": sum(r.status == "pruned" for r in results),
-                               "failed": sum(r.status == "failed" for r in results),
-                               "optimal": sum(r.status == "optimal" for r in results)})
-        return out_counts
-
-    def write(winner=None, partial=True):
-        if folder is None:
-            return
-        results = _labelled(manager.results.values(), specs) if manager else []
-        folder.write_result(result_document(
-            scenario, settings_json(scenario, jobs=engine.jobs), counts(), seconds, results, winner,
-            time.perf_counter() - start, partial, state["status"], state["message"]))
-
-    try:
-        write()
+    start = time.perf_counter()
+    with RunRecorder(out, scenario, jobs=engine.jobs) as recorder:
         for verdict in filter_compositions(scenario, engine=engine, settings=feasibility):
             summary.add(verdict)
             notify("feasibility", {"checked": summary.checked, "feasible": len(summary.survivors)})
-        seconds["feasibility"] = time.perf_counter() - start
+        recorder.update(counts=summary.counts(), seconds={"feasibility": time.perf_counter() - start})
         if not summary.survivors:
-            state.update(status="infeasible", message=summary.diagnosis())
-            write(partial=False)
+            recorder.finish("infeasible", summary.diagnosis())
             raise InfeasibleError(summary.diagnosis())
 
         survivors = sorted(summary.survivors, key=lambda v: (v.time_bound, v.composition.name))
         specs = list(candidate_specs(survivors))
-        names = [spec.name for spec in specs]
-        if engine.jobs == 1:
-            executor = InProcessExecutor(make_candidate, scenario, specs, names)
-        else:
-            executor = ProcessExecutor(make_candidate, scenario, specs, names, engine.jobs)
-        manager = PruningManager(executor, scenario.pruning)
+        manager = PruningManager(make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs),
+                                 scenario.pruning)
+        recorder.update(counts={"optimized": len(survivors), "candidates": len(specs)})
         optimization_start = time.perf_counter()
-        last_write = 0.0
         rounds = 0
-        for progress in manager.rounds():
-            rounds = progress.round
-            notify("optimization", _progress_figures(progress, len(specs)))
-            if folder is not None and time.perf_counter() - last_write > 1.0:
-                seconds["optimization"] = time.perf_counter() - optimization_start
-                write()
-                last_write = time.perf_counter()
-        seconds["optimization"] = time.perf_counter() - optimization_start
-        results = _labelled(manager.results.values(), specs)
-        optimal = [r for r in results if r.status == "optimal"]
-        if not optimal:
+
+        by_name = {spec.name: spec for spec in specs}
+
+        def record(every: float = 0.0) -> list[CandidateResult]:
+            results = [_labelled(r, by_name[r.name]) for r in manager.results.values()]
+            recorder.update(counts=_status_counts(results), results=results, every=every,
+                            seconds={"optimization": time.perf_counter() - optimization_start})
+            return results
+
+        try:
+            for progress in manager.rounds():
+                rounds = progress.round
+                notify("optimization", _progress_figures(progress, len(specs)))
+                record(every=1.0)
+        finally:
+            results = record()
+        winner = _winner(results)
+        if winner is None:
             reasons = "; ".join(f"{r.name}: {r.reason}" for r in results[:3])
-            state.update(status="failed", message=f"every candidate failed ({reasons})")
-            write(partial=False)
+            recorder.finish("failed", f"every candidate failed ({reasons})")
             raise InfeasibleError(f"no candidate converged to a verified trajectory ({reasons})")
-        winner = min(optimal, key=lambda r: (r.cost, r.name))
-        winner_block = None
-        if folder is not None:
-            report_start = time.perf_counter()
-            problem = make_candidate(scenario, specs[names.index(winner.name)]).problem
-            problem = problem.refined(winner.substeps, winner.waypoints)
-            files = folder.write_winner(problem, winner)
-            plot_pruning_history(results, winner.name, folder.file(PRUNING_PLOT),
-                                 f"{scenario.name}: rule {scenario.pruning.rule}")
-            files["pruning_plot"] = PRUNING_PLOT
-            seconds["report"] = time.perf_counter() - report_start
-            winner_block = winner_json(winner, files)
-        state.update(status="done")
-        write(winner_block, partial=False)
-        return RunResult(tuple(results), winner, summary, rounds, dict(seconds))
-    except KeyboardInterrupt:
-        state.update(status="interrupted", message="interrupted by the user; candidates still running "
-                                                   "were stopped")
-        write()
-        raise
+        recorder.record_winner(winner, f"{scenario.name}: rule {scenario.pruning.rule}")
+        recorder.finish("done")
+        return RunResult(tuple(results), winner, summary, rounds, dict(recorder.seconds))
 
 
-def _labelled(results: Iterable[CandidateResult], specs: list[CandidateSpec]) -> list[CandidateResult]:
-    """``results`` with their composition and boundary pair filled in where a candidate never ran
-    (a result made without its :class:`~modular_robots.candidate.Candidate`)."""
-    by_name = {spec.name: spec for spec in specs}
-    return [r if r.composition or r.name not in by_name else
-            replace(r, composition=by_name[r.name].verdict.composition.name,
-                    boundary_pair=by_name[r.name].boundary_pair) for r in results]
+def optimize_composition(scenario: Scenario, name: str, out: str | Path | None = None,
+                         on_iterate: Callable[[str, Iterate], None] | None = None) -> RunResult:
+    """Step C for one composition, in this process: a verified minimum-cost trajectory and its
+    results folder (``result.json`` has the best candidate as the winner).
+
+    ``name`` is a composition (optimised from each boundary pair step B offers, one after the
+    other, the better verified motion winning) or ``NAME+clear`` / ``NAME+fastest`` (that pair
+    only). ``on_iterate(candidate, iterate)`` is called after every solver iteration.
+
+    Raises
+    ------
+    CompositionError
+        If ``name`` is not a composition of the catalogue, or names a pair it does not have.
+    InfeasibleError
+        If the composition fails step B, or no candidate verifies.
+    """
+    base, _, only = name.partition("+")
+    if only and only not in tuple(BoundaryPair):
+        raise CompositionError(f"{name!r}: the suffix after '+' must be one of "
+                               f"{', '.join(tuple(BoundaryPair))}")
+    chain = Composition.from_name(base, scenario.catalog)
+    start = time.perf_counter()
+    verdict = check_composition(chain, scenario.catalog, scenario.task)
+    summary = FeasibilitySummary()
+    summary.add(verdict)
+    if not verdict.passed:
+        raise InfeasibleError(f"{chain.name} cannot do the task: {verdict.message}")
+    specs = [s for s in candidate_specs([verdict]) if not only or s.boundary_pair == only]
+    if not specs:
+        raise CompositionError(f"{chain.name} has no clear boundary pair: the straight line of its fastest pair "
+                               "already clears the obstacles, or no pair's line does")
+    notify = on_iterate or (lambda candidate, iterate: None)
+    candidates = [make_candidate(scenario, spec) for spec in specs]
+    with RunRecorder(out, scenario, rule="single composition") as recorder:
+        recorder.update(counts={"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates),
+                                "pruned": 0}, seconds={"feasibility": time.perf_counter() - start})
+
+        def record() -> list[CandidateResult]:
+            results = [c.result for c in candidates if c.result is not None]
+            recorder.update(results=results, seconds={"optimization": sum(c.seconds for c in candidates)})
+            return results
+
+        try:
+            with single_threaded_blas():
+                for candidate in candidates:
+                    for it in candidate.iterate():
+                        notify(candidate.name, it)
+                    record()
+        except KeyboardInterrupt:
+            for candidate in candidates:
+                candidate.close()
+            done = _winner(record())
+            if done is not None:
+                recorder.record_winner(done)
+            recorder.finish("interrupted", "interrupted by the user" + (
+                f"; {done.name} had already verified and is written as the winner so far" if done else ""))
+            raise
+        finally:
+            for candidate in candidates:
+                if candidate.result is None:
+                    candidate.close()
+        results = record()
+        winner = _winner(results)
+        if winner is None:
+            reason = "; ".join(f"{r.name}: {r.reason}" for r in results)
+            recorder.finish("failed", reason)
+            raise InfeasibleError(reason)
+        recorder.record_winner(winner)
+        recorder.finish("done")
+        return RunResult(tuple(results), winner, summary, 0, dict(recorder.seconds))
+
+
+def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
+    """``result`` with its composition and boundary pair filled in if it never ran."""
+    if result.composition:
+        return result
+    return replace(result, composition=spec.composition.name, boundary_pair=spec.boundary_pair)
 
 
 def _progress_figures(progress: Progress, total: int) -> dict:
     return {"round": progress.round, "alive": progress.alive, "total": total, "best_cost": progress.best_cost,
-            "best_optimal": progress.best_optimal,
-            "pruned": progress.pruned, "finished": progress.finished}
+            "best_optimal": progress.best_optimal, "pruned": progress.pruned, "finished": progress.finished}
 
 
 def with_pruning(scenario: Scenario, rule: str | None = None, threshold: float | None = None) -> Scenario:
     """``scenario`` with its pruning rule and/or threshold overridden."""
     overrides = {k: v for k, v in (("rule", rule), ("threshold", threshold)) if v is not None}
     return replace(scenario, pruning=replace(scenario.pruning, **overrides)) if overrides else scenario
-

@@ -23,7 +23,7 @@ the inverse transcription the refined problem keeps every constraint of the coar
 more, so that optimum is a lower bound of what the re-solve can reach. And every candidate is
 also judged on a lower bound of its final cost, whether or not its iterates are trusted: the
 minimum time its busiest joint needs at its velocity limit
-(:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`; 0 for the ``effort`` cost). A
+(:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`; 0 for the ``effort`` cost). A
 candidate whose bound alone is clearly worse than the reference is pruned from
 ``start_iteration`` on, as soon as there is a reference, before it spends iterations on becoming
 feasible.
@@ -63,20 +63,16 @@ decisions do not depend on the number of workers.
 from __future__ import annotations
 
 import logging
-import multiprocessing
-import signal
 from collections import deque
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
 
-from .candidate import Candidate, CandidateResult
-from .exceptions import ModularRobotsError
+from .execution import Executor
+from .ocp.candidate import CandidateResult, CandidateStatus
+from .ocp.solver import Iterate
 from .scenario import PruningSettings
-from .solver import Iterate
 
-__all__ = ["Progress", "Executor", "InProcessExecutor", "ProcessExecutor", "PruningManager", "ratio_rule", "reference_cost",
-           "GUARD_VIOLATION"]
+__all__ = ["Progress", "PruningManager", "RoundCosts", "ratio_rule", "reference_cost", "GUARD_VIOLATION"]
 
 logger = logging.getLogger(__name__)
 
@@ -93,43 +89,64 @@ def reference_cost(costs: Mapping[str, float], violations: Mapping[str, float],
     return min(trusted) if trusted else None
 
 
-def ratio_rule(costs: Mapping[str, float], violations: Mapping[str, float], converged: Mapping[str, float],
-               iteration: int, threshold: float = 0.5, start_iteration: int = 2,
-               guard_violation: float = GUARD_VIOLATION, earlier: Mapping[str, float] | None = None,
-               lookahead: float = 0.0, untrusted_for: Mapping[str, int] | None = None,
-               patience: int = 0, floors: Mapping[str, float] | None = None) -> set[str]:
-    """Names of the live candidates (keys of ``costs``) to prune after round ``iteration``: those
-    whose own iterate is trusted and whose cost exceeds the guarded reference by more than
-    ``threshold`` (relative).
+@dataclass(frozen=True)
+class RoundCosts:
+    """What the rule sees after round ``iteration``.
 
-    With ``earlier`` (the progress guard), a candidate is judged only if it also had a trusted
-    cost ``earlier[k]`` a window of iterations ago, and it is kept while
-    ``c_k - lookahead * (earlier[k] - c_k)`` is within the threshold: still converging towards it.
-    With ``patience > 0``, a candidate whose iterates have not been trusted for
-    ``untrusted_for[k] >= patience`` iterations is pruned too, once a reference exists.
-    ``floors`` are lower bounds of candidates' final costs (the problem's
-    :attr:`~modular_robots.shooting.ShootingProblem.cost_bound`, or a re-solve's previous optimum):
-    a candidate whose bound exceeds the threshold is pruned whatever its iterate; one absent from
-    ``costs`` is judged on its bound only and is no reference.
+    ``costs`` and ``violations``: the current iterate of each live candidate that is judged on
+    its iterates; ``converged``: the verified cost of each candidate that has converged;
+    ``earlier``: each live candidate's trusted cost a window of iterations ago (None: no progress
+    guard); ``untrusted_for``: how many iterations in a row each has not been trusted;
+    ``floors``: lower bounds of candidates' final costs (the problem's
+    :attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`, or a re-solve's previous
+    optimum).
     """
-    if iteration < start_iteration:
+
+    iteration: int
+    costs: Mapping[str, float]
+    violations: Mapping[str, float]
+    converged: Mapping[str, float] = field(default_factory=dict)
+    earlier: Mapping[str, float] | None = None
+    untrusted_for: Mapping[str, int] = field(default_factory=dict)
+    floors: Mapping[str, float] = field(default_factory=dict)
+
+
+def ratio_rule(view: RoundCosts, settings: PruningSettings = PruningSettings(),
+               guard_violation: float = GUARD_VIOLATION) -> set[str]:
+    """Names of the candidates to prune after a round: those whose own iterate is trusted and
+    whose cost exceeds the guarded reference by more than ``settings.threshold`` (relative), from
+    ``settings.start_iteration`` on.
+
+    With ``view.earlier`` (the progress guard), a candidate is judged only if it also had a
+    trusted cost ``earlier[k]`` a window of iterations ago, and it is kept while
+    ``c_k - lookahead * (earlier[k] - c_k)`` is within the threshold: still converging towards it.
+    With ``settings.patience > 0``, a candidate whose iterates have not been trusted for
+    ``untrusted_for[k] >= patience`` iterations is pruned too, once a reference exists. A
+    candidate whose floor exceeds the threshold is pruned whatever its iterate; one absent from
+    ``view.costs`` is judged on its floor only and is no reference.
+    """
+    if view.iteration < settings.start_iteration:
         return set()
-    reference = reference_cost(costs, violations, converged, guard_violation)
+    reference = reference_cost(view.costs, view.violations, view.converged, guard_violation)
     if reference is None or reference <= 0.0:
         return set()
+
+    def above(cost: float) -> bool:
+        return (cost - reference) / reference > settings.threshold
+
     chosen = set()
-    for k, c in costs.items():
-        if violations[k] > guard_violation:
-            if patience and untrusted_for is not None and untrusted_for.get(k, 0) >= patience:
+    for k, c in view.costs.items():
+        if view.violations[k] > guard_violation:
+            if settings.patience and view.untrusted_for.get(k, 0) >= settings.patience:
                 chosen.add(k)
             continue
-        if (c - reference) / reference <= threshold:
+        if not above(c):
             continue
-        if earlier is not None and (k not in earlier
-                                    or (c - lookahead * (earlier[k] - c) - reference) / reference <= threshold):
+        if view.earlier is not None and (k not in view.earlier
+                                         or not above(c - settings.lookahead * (view.earlier[k] - c))):
             continue
         chosen.add(k)
-    chosen |= {k for k, b in (floors or {}).items() if (b - reference) / reference > threshold}
+    chosen |= {k for k, b in view.floors.items() if above(b)}
     return chosen
 
 
@@ -149,181 +166,12 @@ class Progress:
     best_optimal: float | None = None
 
 
-class Executor(Protocol):
-    """Hosts the candidates and advances them on command (one solver iteration each)."""
-
-    def names(self) -> list[str]: ...
-
-    def advance(self, names: Sequence[str]) -> dict[str, Iterate | CandidateResult]:
-        """One iteration of each named candidate: its new iterate, or its result if it ended."""
-        ...
-
-    def stop(self, names: Sequence[str]) -> dict[str, CandidateResult]:
-        """Close the named candidates and return their results (status ``stopped``)."""
-        ...
-
-    def shutdown(self) -> None: ...
-
-
-def _advance(candidates: dict, iterators: dict, names) -> dict:
-    out = {}
-    for name in names:
-        try:
-            out[name] = next(iterators[name])
-        except StopIteration:
-            out[name] = candidates[name].result
-    return out
-
-
-def _stop(candidates: dict, names) -> dict:
-    out = {}
-    for name in names:
-        candidates[name].close()
-        out[name] = candidates[name].result
-    return out
-
-
-class InProcessExecutor:
-    """The candidates as generators in this process: ``factory(context, spec)`` builds one
-    :class:`~modular_robots.candidate.Candidate` per spec, when first advanced."""
-
-    def __init__(self, factory: Callable[[Any, Any], Candidate], context: Any, specs: Sequence[Any],
-                 names: Sequence[str]):
-        self._names = list(names)
-        self._pending = dict(zip(self._names, specs))
-        self._factory, self._context = factory, context
-        self._candidates: dict[str, Candidate] = {}
-        self._iterators: dict = {}
-
-    def names(self) -> list[str]:
-        return list(self._names)
-
-    def _build(self, names) -> None:
-        for name in names:
-            if name not in self._candidates:
-                candidate = self._factory(self._context, self._pending[name])
-                del self._pending[name]
-                self._candidates[name] = candidate
-                self._iterators[name] = candidate.iterate()
-
-    def advance(self, names):
-        self._build(names)
-        return _advance(self._candidates, self._iterators, names)
-
-    def stop(self, names):
-        out = {name: _never_started(name) for name in names if name not in self._candidates}
-        out.update(_stop(self._candidates, [n for n in names if n in self._candidates]))
-        return out
-
-    def shutdown(self) -> None:
-        for candidate in self._candidates.values():
-            if candidate.result is None:
-                candidate.close()
-
-
-def _never_started(name: str) -> CandidateResult:
-    nan = float("nan")
-    return CandidateResult(name, 0, "stopped", "stopped before it started", 0, 0.0, nan, nan, nan, cost_bound=nan)
-
-
-def _worker(conn, factory, context, specs, names) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop (Ctrl-C)
-    executor = InProcessExecutor(factory, context, specs, names)
-    try:
-        while True:
-            command, names = conn.recv()
-            if command == "advance":
-                conn.send(executor.advance(names))
-            elif command == "stop":
-                conn.send(executor.stop(names))
-            else:
-                break
-    except (EOFError, KeyboardInterrupt):
-        pass
-    finally:
-        executor.shutdown()
-        conn.close()
-
-
-class ProcessExecutor:
-    """Worker processes that each host a fixed share of the candidates (round robin) and advance
-    them on command, so the lockstep holds across processes. A distributed engine only has to
-    offer the same four methods."""
-
-    def __init__(self, factory: Callable[[Any, Any], Candidate], context: Any, specs: Sequence[Any],
-                 names: Sequence[str], jobs: int):
-        self._names = list(names)
-        jobs = max(1, min(jobs, len(self._names)))
-        ctx = multiprocessing.get_context()
-        self._owner = {name: i % jobs for i, name in enumerate(self._names)}
-        self._conns, self._procs = [], []
-        self._awaiting: set[int] = set()
-        for w in range(jobs):
-            mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
-            parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, factory, context, [specs[i] for i in mine],
-                                                     [self._names[i] for i in mine]), daemon=True)
-            proc.start()
-            child.close()
-            self._conns.append(parent)
-            self._procs.append(proc)
-
-    def names(self) -> list[str]:
-        return list(self._names)
-
-    def _command(self, command: str, names, tolerate_dead: bool = False) -> dict:
-        by_worker: dict[int, list[str]] = {}
-        for name in names:
-            by_worker.setdefault(self._owner[name], []).append(name)
-        out = {}
-        for w, mine in by_worker.items():
-            try:
-                if w in self._awaiting:  # a reply left unread by an interruption
-                    self._conns[w].recv()
-                    self._awaiting.discard(w)
-                self._conns[w].send((command, mine))
-                self._awaiting.add(w)
-            except (EOFError, OSError) as exc:
-                if not tolerate_dead:
-                    raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
-                out.update({name: _never_started(name) for name in mine})
-        for w in by_worker:
-            if w not in self._awaiting:
-                continue
-            try:
-                out.update(self._conns[w].recv())
-                self._awaiting.discard(w)
-            except (EOFError, OSError) as exc:
-                self._awaiting.discard(w)
-                if not tolerate_dead:
-                    raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
-                out.update({name: _never_started(name) for name in by_worker[w]})
-        return out
-
-    def advance(self, names):
-        return self._command("advance", names)
-
-    def stop(self, names):
-        return self._command("stop", names, tolerate_dead=True)
-
-    def shutdown(self) -> None:
-        for conn in self._conns:
-            try:
-                conn.send(("exit", []))
-            except (BrokenPipeError, OSError):
-                pass
-        for proc in self._procs:
-            proc.join(timeout=10)
-            if proc.is_alive():
-                proc.terminate()
-
-
 @dataclass
 class PruningManager:
     """Run the candidates of ``executor`` in lockstep under ``settings`` (see the module docstring).
 
     :meth:`rounds` is a generator of :class:`Progress`; afterwards :attr:`results` holds one
-    :class:`~modular_robots.candidate.CandidateResult` per candidate, in the executor's order.
+    :class:`~modular_robots.ocp.candidate.CandidateResult` per candidate, in the executor's order.
     """
 
     executor: Executor
@@ -349,18 +197,18 @@ class PruningManager:
                 stepped = self.executor.advance(alive)
                 finished = []
                 for name in alive:
-                    value = stepped[name]
-                    if isinstance(value, CandidateResult):
+                    ended, value = stepped[name]
+                    if ended:
                         self.results[name] = value
                         finished.append(name)
-                        if value.status == "optimal":
+                        if value.status == CandidateStatus.OPTIMAL:
                             converged[name] = value.cost
                     else:
                         self._remember(name, value)
                 alive = [n for n in alive if n not in self.results]
                 pruned = self._prune(alive, converged, round_)
                 if pruned:
-                    for name, result in self.executor.stop(pruned).items():
+                    for name, result in self._stop(pruned).items():
                         self.results[name] = result.pruned(round_)
                     alive = [n for n in alive if n not in pruned]
                 best = reference_cost({n: self.last[n].cost for n in alive if n in self.last},
@@ -371,7 +219,7 @@ class PruningManager:
         finally:
             try:
                 if alive:
-                    for name, result in self.executor.stop(alive).items():
+                    for name, result in self._stop(alive).items():
                         self.results.setdefault(name, result)
             except Exception:  # noqa: BLE001 - a dead worker must not hide the original error
                 logger.debug("stopping the live candidates failed", exc_info=True)
@@ -384,6 +232,10 @@ class PruningManager:
             pass
         return list(self.results.values())
 
+    def _stop(self, names: list[str]) -> dict[str, CandidateResult]:
+        return {name: result if result is not None else CandidateResult.never_started(name)
+                for name, result in self.executor.stop(names).items()}
+
     def _prune(self, alive: list[str], converged: dict[str, float], round_: int) -> list[str]:
         if self.settings.rule == "none":
             return []
@@ -393,16 +245,15 @@ class PruningManager:
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
         floors = {n: max(self.last[n].cost_bound, self.floor.get(n, 0.0) if self.last[n].refinement > 0 else 0.0)
                   for n in alive if n in self.last}
-        costs = {n: self.last[n].cost for n in live}
-        violations = {n: self.last[n].constraint_violation for n in live}
         s = self.settings
         earlier = None
         if s.window:
             earlier = {n: self.trusted[n][0] for n in live
                        if len(self.trusted[n]) == s.window + 1 and self.trusted[n][0] is not None}
-        chosen = ratio_rule(costs, violations, converged, round_, s.threshold, s.start_iteration,
-                            self.guard_violation, earlier, s.lookahead, self.untrusted_for, s.patience,
-                            floors)
+        view = RoundCosts(round_, {n: self.last[n].cost for n in live},
+                          {n: self.last[n].constraint_violation for n in live}, converged, earlier,
+                          self.untrusted_for, floors)
+        chosen = ratio_rule(view, s, self.guard_violation)
         return [n for n in alive if n in chosen]
 
     def _remember(self, name: str, iterate: Iterate) -> None:

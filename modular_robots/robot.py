@@ -209,15 +209,22 @@ def composition_primitives(composition: Composition, catalog: Catalog) -> list[P
     return out
 
 
-@lru_cache(maxsize=256)
 def robot_model(composition: Composition, catalog: Catalog, payload: float = 0.0) -> RobotModel:
     """The :class:`RobotModel` of ``composition`` carrying ``payload`` kg at ``tool0``.
 
-    Built from the generated URDF (nothing is written to disk) and cached per
-    ``(composition, catalog, payload)``; module armatures are applied to the model.
+    Built from the generated URDF (nothing is written to disk); module armatures are applied to
+    the model. The Pinocchio model is built once per ``(composition, catalog, payload)`` and
+    shared, since nothing changes it; every call gets its own :class:`RobotModel`, with its own
+    Pinocchio ``Data``, so two users of the same composition never share a workspace.
     """
+    model, urdf = _pinocchio_model(composition, catalog, payload)
+    return RobotModel(model, "tool0", composition_primitives(composition, catalog), composition.name, urdf)
+
+
+@lru_cache(maxsize=256)
+def _pinocchio_model(composition: Composition, catalog: Catalog, payload: float) -> tuple[pin.Model, str]:
     urdf = composition_urdf(composition, catalog, payload)
     model = pin.buildModelFromXML(urdf)
     joint_modules = [catalog.module(m) for m in composition.modules if catalog.module(m).dof]
     model.armature = np.array([m.armature for m in joint_modules], dtype=float)
-    return RobotModel(model, "tool0", composition_primitives(composition, catalog), composition.name, urdf)
+    return model, urdf

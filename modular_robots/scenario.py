@@ -8,14 +8,21 @@ from pathlib import Path
 
 from ._yamlio import Fields, load_yaml
 from .catalog import Catalog, catalog_from_fields, load_catalog
-from .collision import SphereObstacle
 from .exceptions import InputError, ScenarioError
 
-__all__ = ["Task", "OptimizerSettings", "PruningSettings", "Scenario", "load_scenario"]
+__all__ = ["SphereObstacle", "Task", "OptimizerSettings", "PruningSettings", "Scenario", "load_scenario"]
 
 COSTS = ("time", "effort")
 RULES = ("ratio", "none")
 TRANSCRIPTIONS = ("forward", "inverse")
+
+
+@dataclass(frozen=True)
+class SphereObstacle:
+    """A sphere obstacle: ``center`` in the base frame [m], ``radius`` [m]."""
+
+    center: tuple[float, float, float]
+    radius: float
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ Reference: a point-mass pendulum in a vertical plane, whose dynamics are written
 is held with 99.9 % of the torque limit and its start lies above the horizontal on the same side,
 so the straight line passes poses (the horizontal) that need 1.11 times the limit to hold. Arriving
 from above, the arm cannot brake at the goal; it has to overshoot to where holding is easier and
-come back up, which is the guess :func:`~modular_robots.guess.swing_path` gives.
+come back up, which is the guess :func:`~modular_robots.ocp.guess.swing_path` gives.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from modular_robots.candidate import Candidate
-from modular_robots.guess import swing_path
-from modular_robots.report import ResultsFolder
+from modular_robots.ocp.candidate import Candidate
+from modular_robots.ocp.guess import swing_path
+from modular_robots.report import write_winner_files
 from modular_robots.robot import RobotModel
 from modular_robots.scenario import OptimizerSettings
-from modular_robots.shooting import ShootingProblem
+from modular_robots.ocp.shooting import ShootingProblem
 
 G0, MASS, ARM, I_OWN = 9.81, 1.0, 1.0, 1e-4
 Q_START, Q_GOAL, HOLD_SHARE = -1.2, 0.45, 0.999
@@ -102,6 +102,10 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
     swung = problem.refined(result.substeps, result.waypoints)
     tf, _, controls = swung.unpack(result.y)
     intervals = swung.intervals
+    # the result carries its own plan, sampled on the swing's problem: to tf, past the goal and back
+    assert result.trajectory.t[-1] == pytest.approx(tf, rel=1e-12)
+    assert result.trajectory.q[-1, 0] == pytest.approx(Q_GOAL, abs=1e-9)
+    assert result.trajectory.q[:, 0].max() > Q_GOAL + 0.05
     inertia = MASS * ARM**2 + I_OWN
     if transcription == "forward":
         def torque(t, q, v):
@@ -129,7 +133,7 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
 
 def test_a_candidate_closed_during_its_swing_solve_records_the_swing_problem(tmp_path):
     """``y`` is scaled by the initial guess's ``tf``, so a result taken mid-swing must carry the
-    swing's waypoints; exporting it against the first problem is refused."""
+    swing's waypoints; a stopped result has no trajectory, and exporting one is refused."""
     problem = ShootingProblem(pendulum(), [Q_START], [Q_GOAL], settings=OptimizerSettings(max_iterations=100))
     candidate = Candidate(problem)
     swinging = 0
@@ -144,9 +148,6 @@ def test_a_candidate_closed_during_its_swing_solve_records_the_swing_problem(tmp
     swung = problem.refined(result.substeps, result.waypoints)
     assert swung.unpack(result.y)[0] == pytest.approx(result.tf, rel=1e-12)
     assert problem.unpack(result.y)[0] != pytest.approx(result.tf, rel=1e-3)
-    folder = ResultsFolder(tmp_path)
-    with pytest.raises(ValueError, match="pendulum: its decision vector belongs to a problem with 4 sub-steps "
-                                         "and its own initial guess"):
-        folder.write_winner(problem, result)
-    trajectory = np.loadtxt(tmp_path / folder.write_winner(swung, result)["trajectory"], delimiter=",", skiprows=1)
-    assert trajectory[-1, 0] == pytest.approx(result.tf, rel=1e-8)
+    assert result.trajectory is None
+    with pytest.raises(ValueError, match="^pendulum: a stopped result has no trajectory to write$"):
+        write_winner_files(tmp_path, result)

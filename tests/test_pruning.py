@@ -22,14 +22,15 @@ import pytest
 from click.testing import CliRunner
 
 from modular_robots import feasibility
-from modular_robots.candidate import CandidateResult
+from modular_robots.ocp.candidate import CandidateResult
 from modular_robots.cli import main
 from modular_robots.composition import Composition
 from modular_robots.pipeline import RunResult, run_scenario
-from modular_robots.pruning import (GUARD_VIOLATION, InProcessExecutor, ProcessExecutor, Progress,
-                                    PruningManager, ratio_rule, reference_cost)
+from modular_robots.execution import InProcessExecutor, ProcessExecutor
+from modular_robots.pruning import GUARD_VIOLATION, Progress, PruningManager, RoundCosts, reference_cost
+from modular_robots.pruning import ratio_rule as _ratio_rule
 from modular_robots.scenario import PruningSettings, load_scenario
-from modular_robots.solver import Iterate
+from modular_robots.ocp.solver import Iterate
 
 from .conftest import PAPER_SCENARIO, ROOT
 
@@ -40,7 +41,7 @@ SPEC_CANDIDATE_FIELDS = {"composition", "dof", "status", "iterations", "cost", "
 
 
 # --------------------------------------------------------------------------------------------
-# Scripted fake candidates (same interface as modular_robots.candidate.Candidate for executors)
+# Scripted fake candidates (same interface as modular_robots.ocp.candidate.Candidate for executors)
 # --------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -107,9 +108,10 @@ class FakeCandidate:
         if cost is None:
             cost = last.cost if last else float("nan")
         self.result = CandidateResult(
-            self.name, 3, status, f"scripted {status}", last.iteration if last else 0, 0.0, cost, cost,
-            last.constraint_violation if last else float("nan"), tuple(self.history),
-            verification=None, substeps=4, pruned_at_iteration=None, y=last.y if last else None)
+            name=self.name, dof=3, status=status, reason=f"scripted {status}",
+            iterations=last.iteration if last else 0, cost=cost, tf=cost,
+            constraint_violation=last.constraint_violation if last else float("nan"),
+            cost_history=tuple(self.history), substeps=4, y=last.y if last else None)
 
 
 def fake_factory(context, spec: Script) -> FakeCandidate:
@@ -137,6 +139,16 @@ class RecordingExecutor:
     def shutdown(self):
         self.log.append(("shutdown",))
         self.inner.shutdown()
+
+
+def ratio_rule(costs, violations, converged, iteration, threshold=0.5, start_iteration=2,
+               guard_violation=GUARD_VIOLATION, earlier=None, lookahead=0.0, untrusted_for=None, patience=0,
+               floors=None):
+    """The rule on one round's figures, with the settings spelt out (0 turns a guard part off)."""
+    view = RoundCosts(iteration, costs, violations, converged, earlier, untrusted_for or {}, floors or {})
+    settings = PruningSettings("ratio", threshold, start_iteration, window=0, lookahead=lookahead,
+                               patience=patience)
+    return _ratio_rule(view, settings, guard_violation)
 
 
 #: The ratio rule without the guard's progress window and patience (scripts are short).

@@ -32,17 +32,19 @@ import pytest
 from click.testing import CliRunner
 from scipy.integrate import solve_ivp
 
-from modular_robots.candidate import Candidate, _crossing, composition_problem
+from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem
 from modular_robots.cli import main
-from modular_robots.collision import SphereObstacle
+from modular_robots.scenario import SphereObstacle
 from modular_robots.composition import Composition
 from modular_robots.feasibility import check_composition
-from modular_robots.pipeline import candidate_specs, make_candidate
+from modular_robots.exceptions import CompositionError
+from modular_robots.ocp.candidate import make_candidate
+from modular_robots.pipeline import candidate_specs, optimize_composition
 from modular_robots.robot import Primitive, RobotModel
 from modular_robots.scenario import OptimizerSettings, load_scenario
-from modular_robots.shooting import NonFiniteError, ShootingProblem
-from modular_robots.solver import ShootingSolver
-from modular_robots.verification import Verification, sample_trajectory, verify
+from modular_robots.ocp.shooting import NonFiniteError, ShootingProblem
+from modular_robots.ocp.solver import ShootingSolver
+from modular_robots.ocp.verification import Verification, sample_trajectory, verify
 
 from .conftest import PAPER_5KG
 
@@ -186,7 +188,8 @@ def paper():
             assert verdicts[name].passed, verdicts[name].message
         task = replace(scenario.task, cost=cost, obstacles=scenario.task.obstacles if obstacles else ())
         settings = OptimizerSettings(nodes=nodes, substeps=substeps, transcription=transcription)
-        return composition_problem(composition, scenario.catalog, task, settings, verdicts[name])
+        verdict = verdicts[name]
+        return composition_problem(composition, scenario.catalog, task, verdict.q_start, verdict.q_goal, settings)
 
     return problem
 
@@ -653,10 +656,10 @@ def test_a_composition_without_a_clear_pair_has_one_candidate():
     verdict = check_composition(composition, scenario.catalog, scenario.task)
     assert verdict.passed and verdict.clear_pair is None
     assert [s.name for s in candidate_specs([verdict])] == [name]
-    with pytest.raises(ValueError, match=r"^B-J1-L1-J1-L3-J1-L3-J1-L1-E1 has no 'clear' boundary pair \(it has "
-                                         r"only fastest; a clear pair exists only when the fastest pair's "
-                                         r"straight line is not clear\)$"):
-        composition_problem(composition, scenario.catalog, scenario.task, verdict=verdict, boundary_pair="clear")
+    with pytest.raises(CompositionError, match=r"^B-J1-L1-J1-L3-J1-L3-J1-L1-E1 has no clear boundary pair: the "
+                                               r"straight line of its fastest pair already clears the obstacles, "
+                                               r"or no pair's line does$"):
+        optimize_composition(scenario, f"{name}+clear")
 
 
 def test_refinement_doubles_substeps_until_the_motion_verifies():

@@ -46,9 +46,15 @@ def test_prismatic_limits_and_armature(paper_catalog):
     assert list(robot.model.armature) == [0.0, 0.0, 0.0]
 
 
-def test_model_is_cached(paper_catalog):
-    composition = Composition.from_name("B-J1-L2-E1", paper_catalog)
-    assert robot_model(composition, paper_catalog, 5.0) is robot_model(composition, paper_catalog, 5.0)
+def test_the_pinocchio_model_is_cached_and_every_robot_has_its_own_data(paper_catalog):
+    composition = Composition.from_name("B-J1-L1-E1", paper_catalog)  # joint 1 swings the tool
+    a, b = robot_model(composition, paper_catalog, 5.0), robot_model(composition, paper_catalog, 5.0)
+    assert a.model is b.model and a.data is not b.data
+    # one robot's kinematics do not overwrite the other's workspace
+    a.tool_position(np.array([0.0, 0.0]))
+    b.tool_position(np.array([1.0, 0.0]))
+    np.testing.assert_allclose(a.data.oMf[a.tool_frame_id].translation, a.tool_position(np.zeros(2)), atol=0)
+    assert not np.allclose(a.data.oMf[a.tool_frame_id].translation, b.data.oMf[b.tool_frame_id].translation)
     assert robot_model(composition, paper_catalog, 5.0) is not robot_model(composition, paper_catalog, 6.0)
 
 

@@ -1,81 +1,123 @@
 """One candidate's trajectory optimisation, from problem to verified result, as a generator.
 
-A :class:`Candidate` chains :class:`~modular_robots.solver.ShootingSolver` runs: it solves,
-verifies (:func:`~modular_robots.verification.verify`) and, when the re-integrated motion misses
+A :class:`Candidate` chains :class:`~modular_robots.ocp.solver.ShootingSolver` runs: it solves,
+verifies (:func:`~modular_robots.ocp.verification.verify`) and, when the re-integrated motion misses
 the goal by more than 1 cm or breaks a limit or the clearance between sub-steps, doubles the RK4
 sub-steps and solves again warm-started from the coarse solution (SPEC §5). When the first solve
 itself fails, it solves once more from a second initial guess
-(:func:`~modular_robots.guess.swing_path`). Iteration numbers run on across all of these, so the
+(:func:`~modular_robots.ocp.guess.swing_path`). Iteration numbers run on across all of these, so the
 pruning manager sees one sequence per candidate.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 
 import numpy as np
 
-from .catalog import Catalog
-from .composition import Composition
-from .exceptions import InfeasibleError
-from .feasibility import FeasibilitySettings, Verdict, check_composition
+from ..catalog import Catalog
+from ..composition import Composition
+from ..robot import robot_model
+from ..scenario import OptimizerSettings, Scenario, Task
 from .guess import swing_path
-from .robot import robot_model
-from .scenario import OptimizerSettings, Task
 from .shooting import ShootingProblem
 from .solver import Iterate, ShootingSolver
-from .verification import Verification, verify
+from .verification import Trajectory, Verification, sample_trajectory, verify
 
-__all__ = ["BOUNDARY_PAIRS", "Candidate", "CandidateResult", "composition_problem"]
+__all__ = ["BoundaryPair", "Candidate", "CandidateResult", "CandidateSpec", "CandidateStatus", "composition_problem",
+           "make_candidate"]
 
-#: Step B's boundary pairs a composition is optimised from (see :func:`composition_problem`).
-BOUNDARY_PAIRS = ("fastest", "clear")
+
+class CandidateStatus(StrEnum):
+    """How a candidate's optimisation ended."""
+
+    #: Converged and verified.
+    OPTIMAL = "optimal"
+    #: The solver failed (iteration limit, infeasible, non-finite) or verification failed.
+    FAILED = "failed"
+    #: Closed before it ended (by the caller, or when a run stops).
+    STOPPED = "stopped"
+    #: Discarded by the pruning manager.
+    PRUNED = "pruned"
+
+
+class BoundaryPair(StrEnum):
+    """Which of step B's boundary pairs a candidate starts from (see :func:`composition_problem`)."""
+
+    #: The IK pair with the smallest velocity-limited travel time.
+    FASTEST = "fastest"
+    #: The fastest pair whose straight joint-space line clears the obstacles.
+    CLEAR = "clear"
 
 
 @dataclass(frozen=True)
+class CandidateSpec:
+    """A step-C candidate to build: a composition and the rest configurations it moves between
+    (``q_start``, ``q_goal`` [rad | m]), taken from step B's ``boundary_pair``."""
+
+    composition: Composition
+    q_start: tuple[float, ...]
+    q_goal: tuple[float, ...]
+    boundary_pair: BoundaryPair = BoundaryPair.FASTEST
+
+    @property
+    def name(self) -> str:
+        """The composition's name, suffixed ``+clear`` for its clear boundary pair."""
+        name = self.composition.name
+        return name if self.boundary_pair == BoundaryPair.FASTEST else f"{name}+{self.boundary_pair}"
+
+
+@dataclass(frozen=True, kw_only=True)
 class CandidateResult:
     """How one candidate's optimisation ended (SPEC §7's per-candidate record).
 
-    ``status``: ``optimal`` (converged and verified), ``failed``, ``stopped`` (closed early) or
-    ``pruned`` (set by the pruning manager). ``cost`` in its unit [s], ``tf`` [s],
+    ``name`` names the candidate (unique in a run), ``composition`` its composition and
+    ``boundary_pair`` the boundary pair it started from. ``cost`` in its unit [s], ``tf`` [s],
     ``cost_history`` and ``violation_history`` the cost and scaled constraint violation after
-    every iteration, ``seconds`` spent in the solver and in
-    verification, ``y`` the last scaled decision vector. ``composition`` names the composition
-    (``name`` names the candidate, unique in a run) and ``boundary_pair`` says which of step B's
-    boundary pairs it started from (:data:`BOUNDARY_PAIRS`).
+    every iteration, ``seconds`` spent in the solver and in verification. ``cost_bound`` is the
+    problem's lower bound on the cost (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`).
+    ``y`` is the last scaled decision vector and ``waypoints`` the joint-space path of the initial
+    guess it is scaled by. An optimal result also carries what the report needs, in SI units:
+    ``trajectory``, the plan sampled at every integration sub-step, and ``urdf``, the robot's URDF.
     """
 
     name: str
     dof: int
-    status: str
+    status: CandidateStatus
     reason: str
-    iterations: int
-    seconds: float
-    cost: float
-    tf: float
-    constraint_violation: float
+    iterations: int = 0
+    seconds: float = 0.0
+    cost: float = float("nan")
+    tf: float = float("nan")
+    constraint_violation: float = float("nan")
     cost_history: tuple[float, ...] = ()
     violation_history: tuple[float, ...] = ()
     verification: Verification | None = None
     substeps: int = 0
     pruned_at_iteration: int | None = None
-    y: np.ndarray | None = field(default=None, repr=False, compare=False)
-    #: The problem's lower bound on the cost (:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`).
     cost_bound: float = 0.0
     composition: str = ""
-    boundary_pair: str = "fastest"
-    #: The joint-space path of the initial guess the solve started from (``y`` is scaled by it).
+    boundary_pair: BoundaryPair = BoundaryPair.FASTEST
+    y: np.ndarray | None = field(default=None, repr=False, compare=False)
     waypoints: np.ndarray | None = field(default=None, repr=False, compare=False)
+    trajectory: Trajectory | None = field(default=None, repr=False, compare=False)
+    urdf: str | None = field(default=None, repr=False, compare=False)
+
+    @classmethod
+    def never_started(cls, name: str, reason: str = "stopped before it started") -> CandidateResult:
+        """The result of a candidate stopped before its first iteration."""
+        return cls(name=name, dof=0, status=CandidateStatus.STOPPED, reason=reason, cost_bound=float("nan"))
 
     def to_json(self) -> dict:
         return {
             "composition": self.composition or self.name,
             "candidate": self.name,
-            "boundary_pair": self.boundary_pair,
+            "boundary_pair": str(self.boundary_pair),
             "dof": self.dof,
-            "status": self.status,
+            "status": str(self.status),
             "reason": self.reason,
             "iterations": self.iterations,
             "seconds": round(self.seconds, 4),
@@ -91,7 +133,7 @@ class CandidateResult:
         }
 
     def pruned(self, iteration: int) -> CandidateResult:
-        return replace(self, status="pruned", reason=f"pruned at iteration {iteration}",
+        return replace(self, status=CandidateStatus.PRUNED, reason=f"pruned at iteration {iteration}",
                        pruned_at_iteration=iteration)
 
 
@@ -115,7 +157,7 @@ class Candidate:
         crossing an obstacle between two clear sub-steps, which no refinement removes (measured on
         paper-5kg: -0.12 m at 4, 8 and 16 sub-steps), so refinement stops there.
     jacobian
-        ``exact`` or ``finite-difference`` (see :class:`~modular_robots.solver.ShootingSolver`).
+        ``exact`` or ``finite-difference`` (see :class:`~modular_robots.ocp.solver.ShootingSolver`).
     composition, boundary_pair
         Recorded in the result (default: ``name`` and ``fastest``).
     restart
@@ -126,20 +168,21 @@ class Candidate:
         restart converged in 30 and 73 iterations.
     swing
         When the first solve fails (after its restart), solve once more, cold, from
-        :func:`~modular_robots.guess.swing_path`'s guess, if it gives one: it made the two
+        :func:`~modular_robots.ocp.guess.swing_path`'s guess, if it gives one: it made the two
         paper-5kg compositions that hold the goal at the edge of a joint's torque limit converge.
         Only a failed candidate pays for it, so the candidates that converge are unchanged.
     """
 
     def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 3,
                  jacobian: str = "exact", restart: bool = True, composition: str | None = None,
-                 boundary_pair: str = "fastest", swing: bool = True):
+                 boundary_pair: BoundaryPair = BoundaryPair.FASTEST,
+                 swing: bool = True):
         self.problem = problem
         self.restart = restart
         self.swing = swing
         self.name = name or problem.robot.name
         self.composition = composition or self.name
-        self.boundary_pair = boundary_pair
+        self.boundary_pair = BoundaryPair(boundary_pair)
         self.max_refinements = max_refinements
         self.jacobian = jacobian
         self.result: CandidateResult | None = None
@@ -156,7 +199,7 @@ class Candidate:
         return self._seconds
 
     def iterate(self) -> Iterator[Iterate]:
-        """Yield an :class:`~modular_robots.solver.Iterate` per solver iteration; afterwards
+        """Yield an :class:`~modular_robots.ocp.solver.Iterate` per solver iteration; afterwards
         :attr:`result` is set. Never raises for a failed optimisation."""
         if self._generator is None:
             self._generator = self._run()
@@ -172,7 +215,7 @@ class Candidate:
         if self._generator is not None:
             self._generator.close()
         if self.result is None:
-            self._finish("stopped", "closed before convergence" + self._note, None)
+            self._finish(CandidateStatus.STOPPED, "closed before convergence" + self._note, None)
 
     def _solve(self, problem: ShootingProblem, y0, offset: int, attempt: int):
         """One solver run, its iterates yielded; returns its outcome."""
@@ -206,19 +249,19 @@ class Candidate:
                 self.problem = self.problem.refined(waypoints=swung)
                 outcome = yield from self._solve_restarting(self.problem, None, offset, attempt)
             if outcome.status != "optimal":
-                self._finish(outcome.status, outcome.reason + self._note, None)
+                self._finish(CandidateStatus(outcome.status), outcome.reason + self._note, None)
                 return
             start = time.perf_counter()
             previous, verification = verification, verify(self.problem, outcome.final.y)
             self._seconds += time.perf_counter() - start
             if verification.passed:
-                self._finish("optimal", outcome.reason + self._note, verification)
+                self._finish(CandidateStatus.OPTIMAL, outcome.reason + self._note, verification)
                 return
             if attempt == self.max_refinements or _crossing(previous, verification):
                 break
             self.problem = self.problem.refined(2 * self.problem.substeps)
             y0, offset = outcome.final.y, outcome.final.iteration
-        self._finish("failed", _verification_failure(verification) + self._note, verification)
+        self._finish(CandidateStatus.FAILED, _verification_failure(verification) + self._note, verification)
 
     def _solve_restarting(self, problem: ShootingProblem, y0, offset: int, attempt: int):
         """:meth:`_solve`, and once more from where it stopped if it hit the iteration limit
@@ -228,14 +271,20 @@ class Candidate:
             outcome = yield from self._solve(problem, outcome.final.y, outcome.final.iteration, attempt)
         return outcome
 
-    def _finish(self, status: str, reason: str, verification: Verification | None):
+    def _finish(self, status: CandidateStatus, reason: str, verification: Verification | None):
         last, problem = self.last, self.problem
+        optimal = status == CandidateStatus.OPTIMAL
         self.result = CandidateResult(
-            self.name, problem.nv, status, reason, last.iteration if last else 0, self._seconds,
-            last.cost if last else np.nan, last.tf if last else np.nan,
-            last.constraint_violation if last else np.nan, tuple(self.history), tuple(self.violations),
-            verification, problem.substeps, None, last.y if last else None, problem.cost_bound,
-            self.composition, self.boundary_pair, problem.waypoints)
+            name=self.name, dof=problem.nv, status=CandidateStatus(status), reason=reason,
+            iterations=last.iteration if last else 0, seconds=self._seconds,
+            cost=last.cost if last else np.nan, tf=last.tf if last else np.nan,
+            constraint_violation=last.constraint_violation if last else np.nan,
+            cost_history=tuple(self.history), violation_history=tuple(self.violations),
+            verification=verification, substeps=problem.substeps, cost_bound=problem.cost_bound,
+            composition=self.composition, boundary_pair=self.boundary_pair,
+            y=last.y if last else None, waypoints=problem.waypoints,
+            trajectory=sample_trajectory(problem, last.y) if optimal else None,
+            urdf=problem.robot.urdf if optimal else None)
 
 
 def _crossing(previous: Verification | None, v: Verification) -> bool:
@@ -259,43 +308,26 @@ def _verification_failure(v: Verification) -> str:
     return f"verification failed after {v.substeps} sub-steps per interval: " + "; ".join(parts)
 
 
-def composition_problem(composition: Composition, catalog: Catalog, task: Task,
-                        settings: OptimizerSettings = OptimizerSettings(), verdict: Verdict | None = None,
-                        feasibility: FeasibilitySettings = FeasibilitySettings(),
-                        boundary_pair: str = "fastest") -> ShootingProblem:
-    """The shooting problem of ``composition`` for ``task``; its boundary configurations come from
-    step B's verdict (computed here if not given).
-
-    ``boundary_pair`` chooses them: ``fastest``, the IK pair with the smallest velocity-limited
-    travel time, or ``clear``, the fastest pair whose straight joint-space line clears the
-    obstacles (:attr:`~modular_robots.feasibility.Verdict.clear_pair`; step B records it only
-    when it is another pair). The two pairs can lead to different optima. From the fastest pair
-    (whose initial guess then detours through a via configuration, see
-    :class:`~modular_robots.shooting.ShootingProblem`) the solver usually finds its way round the
-    obstacle, and that gave the low-10kg winner, 1.02 s against 1.44 s from the clear pair; but
-    it can also settle on a link that jumps through the obstacle between two sub-steps (six
-    paper-5kg candidates; three of their compositions verify from their clear pair). For those
-    pairs a sampling planner found no collision-free joint-space path at all (README, known
-    limits): the jump is what the solver makes of a motion with no clear way.
-
-    Raises
-    ------
-    InfeasibleError
-        If the composition is not feasible for the task (the verdict's message says why).
-    ValueError
-        If it has no such ``boundary_pair``.
-    """
-    if verdict is None:
-        verdict = check_composition(composition, catalog, task, feasibility)
-    if not verdict.passed:
-        raise InfeasibleError(f"{composition.name} cannot do the task: {verdict.message}")
-    if boundary_pair == "fastest":
-        q_start, q_goal = verdict.q_start, verdict.q_goal
-    elif boundary_pair == "clear" and verdict.clear_pair is not None:
-        q_start, q_goal = verdict.clear_pair
-    else:
-        have = "fastest and clear" if verdict.clear_pair is not None else "only fastest"
-        raise ValueError(f"{composition.name} has no {boundary_pair!r} boundary pair (it has {have}; a clear "
-                         "pair exists only when the fastest pair's straight line is not clear)")
+def composition_problem(composition: Composition, catalog: Catalog, task: Task, q_start: Sequence[float],
+                        q_goal: Sequence[float], settings: OptimizerSettings = OptimizerSettings()) -> ShootingProblem:
+    """The shooting problem of ``composition`` for ``task``, from rest at ``q_start`` to rest at
+    ``q_goal`` (step B's boundary configurations, :class:`CandidateSpec`)."""
     robot = robot_model(composition, catalog, task.payload)
     return ShootingProblem(robot, q_start, q_goal, task.obstacles, task.cost, settings)
+
+
+def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:
+    """The step-C candidate of ``spec`` for ``scenario`` (the picklable entry point of worker
+    processes).
+
+    Step B offers up to two boundary pairs per composition (:class:`BoundaryPair`), and they can
+    lead to different optima. From the fastest pair the initial guess detours through a via
+    configuration when its straight line crosses an obstacle
+    (:class:`~modular_robots.ocp.shooting.ShootingProblem`), and the solver usually finds its way
+    round; but it can also settle on a link that jumps through the obstacle between two
+    sub-steps, which verification rejects. The clear pair avoids that start. So a composition with
+    both is optimised from both, as two candidates (``docs/known-limits.md``).
+    """
+    problem = composition_problem(spec.composition, scenario.catalog, scenario.task, spec.q_start, spec.q_goal,
+                                  scenario.optimizer)
+    return Candidate(problem, spec.name, composition=spec.composition.name, boundary_pair=spec.boundary_pair)

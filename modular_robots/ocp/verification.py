@@ -96,13 +96,16 @@ class Verification:
 class Trajectory:
     """A sampled trajectory: times ``t`` (K,) [s], joint positions ``q``, velocities ``qd`` and
     torques ``tau`` (K, nv) — ``tau[k]`` is applied from ``t[k]`` to ``t[k + 1]`` — and the tool
-    position ``tool`` (K, 3) [m] in the base frame."""
+    position ``tool`` (K, 3) [m] in the base frame. ``velocity_limit`` and ``effort_limit`` (nv,)
+    are the robot's limits, for plots."""
 
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
     tau: np.ndarray
     tool: np.ndarray
+    velocity_limit: np.ndarray | None = None
+    effort_limit: np.ndarray | None = None
 
     def header(self) -> list[str]:
         nv = self.q.shape[1]
@@ -126,7 +129,8 @@ def sample_trajectory(problem: ShootingProblem, y: np.ndarray) -> Trajectory:
     tau = np.vstack([prop.torques[:, :S].reshape(-1, nv), prop.torques[-1, S]])
     t = np.linspace(0.0, tf, N * S + 1)
     tool = np.array([problem.robot.tool_position(x[:nv]) for x in states])
-    return Trajectory(t, states[:, :nv], states[:, nv:], tau, tool)
+    return Trajectory(t, states[:, :nv], states[:, nv:], tau, tool, problem.robot.velocity_limit,
+                      problem.robot.effort_limit)
 
 
 def _dynamics(problem: ShootingProblem, node: np.ndarray, u: np.ndarray):

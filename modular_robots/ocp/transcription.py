@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .robot import RobotModel
+from ..robot import RobotModel
 
 __all__ = ["Propagation", "Transcription", "ForwardDynamics", "InverseDynamics", "transcription"]
 

@@ -1,7 +1,7 @@
 """Joint-space paths that seed step C's initial guess (SPEC §5: the straight line).
 
 The shooting problem walks one of these polylines with a trapezoidal velocity profile
-(:meth:`~modular_robots.shooting.ShootingProblem.initial_guess`):
+(:meth:`~modular_robots.ocp.shooting.ShootingProblem.initial_guess`):
 
 * :func:`detour_path`, the default: the straight line from ``q_start`` to ``q_goal`` if it clears
   the obstacles, else the fastest clear detour through one seeded random via configuration (a
@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .collision import CollisionModel
-from .robot import RobotModel
+from ..collision import CollisionModel
+from ..robot import RobotModel
 from .transcription import positive_or_one
 
 __all__ = ["detour_path", "swing_path", "path_times", "GUESS_TRIALS", "SWING", "LOADED"]

@@ -38,7 +38,7 @@ grid on verified plans): from the crossing plans, warm or cold, no solve became 
 converging candidates it cost 2-4 times the time and once a 7 times slower local optimum.
 
 The problem is a plain object: it evaluates cost, constraints and their derivatives; solving is
-:mod:`~modular_robots.solver`'s job.
+:mod:`~modular_robots.ocp.solver`'s job.
 """
 
 from __future__ import annotations
@@ -49,11 +49,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from .collision import CollisionModel, SphereObstacle
-from .exceptions import ModularRobotsError
+from ..collision import CollisionModel, SphereObstacle
+from ..exceptions import ModularRobotsError
 from .guess import detour_path, path_times
-from .robot import RobotModel
-from .scenario import COSTS, OptimizerSettings
+from ..robot import RobotModel
+from ..scenario import COSTS, OptimizerSettings
 from .transcription import Propagation, positive_or_one, transcription
 
 __all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
@@ -97,7 +97,7 @@ class ShootingProblem:
         Overrides ``settings.substeps`` (used by refinement).
     waypoints
         Joint-space path ``(K, nv)`` of the initial guess, from ``q_start`` to ``q_goal``
-        (default: :func:`~modular_robots.guess.detour_path`).
+        (default: :func:`~modular_robots.ocp.guess.detour_path`).
     """
 
     def __init__(self, robot: RobotModel, q_start: Sequence[float], q_goal: Sequence[float],
@@ -174,7 +174,7 @@ class ShootingProblem:
         return float(z[0]), nodes, z[self._u0:].reshape(self.intervals, self.nv)
 
     def initial_guess(self) -> np.ndarray:
-        """Straight line in joint space (or a clear detour, see :mod:`~modular_robots.guess`), a trapezoidal
+        """Straight line in joint space (or a clear detour, see :mod:`~modular_robots.ocp.guess`), a trapezoidal
         velocity profile, ``tf`` from the velocity limits (scaled)."""
         return self._guess.copy()
 

@@ -1,4 +1,4 @@
-"""SciPy ``trust-constr`` on a :class:`~modular_robots.shooting.ShootingProblem`, one iteration at
+"""SciPy ``trust-constr`` on a :class:`~modular_robots.ocp.shooting.ShootingProblem`, one iteration at
 a time (SPEC §6).
 
 ``trust-constr`` owns its loop, so it runs in a helper thread that hands control back after every
@@ -41,7 +41,7 @@ class Iterate:
     ``cost`` in its unit (``tf`` [s] for ``time``, ``integral of |tau / tau_max|^2 dt`` [s] for
     ``effort``), ``tf`` [s], ``constraint_violation`` the largest scaled violation (trust-constr's
     measure), ``y`` the scaled decision vector, ``cost_bound`` the problem's lower bound on its
-    cost (:attr:`~modular_robots.shooting.ShootingProblem.cost_bound`).
+    cost (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`).
     """
 
     iteration: int

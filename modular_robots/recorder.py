@@ -1,0 +1,133 @@
+"""The results folder's lifecycle (SPEC §7): :class:`RunRecorder` is the one writer of
+``result.json``, from the start of a run to its end, whatever that end is.
+
+The document is rewritten as the run goes (started, stage counts, candidate results, winner,
+finished), every time atomically, so an interrupted or crashed run leaves a readable folder whose
+``status`` says what happened.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+from .ocp.candidate import CandidateResult
+from .report import atomic_write, write_pruning_plot, write_winner_files
+from .scenario import Scenario
+
+__all__ = ["RunRecorder", "RESULT", "STATUSES"]
+
+RESULT = "result.json"
+#: ``running`` until the run ends; then ``done``, ``infeasible`` (no composition passes step B),
+#: ``failed`` (no candidate verified, or an error), or ``interrupted``.
+STATUSES = ("running", "done", "infeasible", "failed", "interrupted")
+
+
+class RunRecorder:
+    """Record one run (or one ``optimize``) into the folder ``out``; ``out=None`` records nothing.
+
+    Use it as a context manager: leaving the block with an exception marks the run
+    ``interrupted`` (Ctrl-C) or ``failed`` (any other error) unless it already ended.
+
+    Parameters
+    ----------
+    out
+        The results folder (created if missing).
+    scenario
+        The scenario run; its settings are recorded.
+    settings
+        Extra entries of the ``settings`` block (e.g. ``jobs``, ``rule``).
+    """
+
+    def __init__(self, out: str | Path | None, scenario: Scenario, **settings):
+        self.path = Path(out) if out is not None else None
+        if self.path is not None:
+            self.path.mkdir(parents=True, exist_ok=True)
+        self.scenario = scenario
+        self.settings = {"optimizer": asdict(scenario.optimizer), "pruning": asdict(scenario.pruning),
+                         "cost": scenario.task.cost, "payload": scenario.task.payload, **settings}
+        self.status, self.message = "running", ""
+        self.counts: dict = {}
+        self.seconds: dict[str, float] = {}
+        self.results: list[CandidateResult] = []
+        self.winner: dict | None = None
+        self._start = time.perf_counter()
+        self._last_write = -float("inf")
+
+    # -- the lifecycle ----------------------------------------------------------------------------
+    def __enter__(self) -> RunRecorder:
+        self._write()
+        return self
+
+    def __exit__(self, kind, exc, traceback) -> bool:
+        if kind is not None and self.status == "running":
+            if issubclass(kind, KeyboardInterrupt):
+                self.finish("interrupted", "interrupted by the user; candidates still running were stopped")
+            else:
+                self.finish("failed", f"stopped by an error: {exc}")
+        return False
+
+    def update(self, *, counts: dict | None = None, seconds: dict | None = None,
+               results: Sequence[CandidateResult] | None = None, every: float = 0.0) -> None:
+        """Merge stage ``counts`` and ``seconds``, replace the candidate ``results``, and rewrite the
+        document unless it was written less than ``every`` seconds ago."""
+        self.counts.update(counts or {})
+        self.seconds.update(seconds or {})
+        if results is not None:
+            self.results = list(results)
+        if time.perf_counter() - self._last_write >= every:
+            self._write()
+
+    def record_winner(self, winner: CandidateResult, pruning_plot_title: str | None = None) -> dict:
+        """Write the winner's files (URDF, trajectory, plots) and its block of the document;
+        return the files' names. ``pruning_plot_title``: also plot every candidate's history."""
+        files = {}
+        if self.path is not None:
+            start = time.perf_counter()
+            files = write_winner_files(self.path, winner)
+            if pruning_plot_title is not None:
+                files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
+            self.seconds["report"] = time.perf_counter() - start
+        self.winner = _winner_json(winner, files)
+        return files
+
+    def finish(self, status: str, message: str = "") -> None:
+        """End the run with ``status`` (one of :data:`STATUSES`) and rewrite the document."""
+        if status not in STATUSES[1:]:
+            raise ValueError(f"a run ends as one of {STATUSES[1:]}, not {status!r}")
+        self.status, self.message = status, message
+        self._write()
+
+    # -- the document -----------------------------------------------------------------------------
+    def document(self) -> dict:
+        """``result.json`` as it stands (SPEC §7); ``partial`` is true until the run has finished
+        (and stays true for an interrupted one)."""
+        return {
+            "scenario": self.scenario.name,
+            "scenario_file": str(self.scenario.path) if self.scenario.path else None,
+            "status": self.status,
+            "partial": self.status in ("running", "interrupted"),
+            "message": self.message,
+            "settings": self.settings,
+            "counts": self.counts,
+            "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
+            "candidates": [r.to_json() for r in self.results],
+            "winner": self.winner,
+            "totals": {"optimizer_iterations": int(sum(r.iterations for r in self.results)),
+                       "wall_seconds": round(time.perf_counter() - self._start, 3)},
+        }
+
+    def _write(self) -> None:
+        self._last_write = time.perf_counter()
+        if self.path is not None:
+            atomic_write(self.path / RESULT, json.dumps(self.document(), indent=1, allow_nan=False) + "\n")
+
+
+def _winner_json(result: CandidateResult, files: dict) -> dict:
+    return {"composition": result.composition or result.name, "candidate": result.name,
+            "boundary_pair": str(result.boundary_pair), "dof": result.dof, "cost": result.cost, "tf": result.tf,
+            "iterations": result.iterations, "seconds": round(result.seconds, 4), "substeps": result.substeps,
+            "verification": result.verification.to_json() if result.verification else None, "files": files}
