@@ -35,25 +35,52 @@ def main() -> None:
     tested = serial.checked
     rows = []
     for test in TEST_NAMES:
-        rows.append({"stage": test, "compositions_tested": tested, "removed": serial.removed[test],
-                     "cpu_seconds": serial.seconds[test],
-                     "compositions_per_second": tested / serial.seconds[test] if serial.seconds[test] else None})
+        rows.append(
+            {
+                "stage": test,
+                "compositions_tested": tested,
+                "removed": serial.removed[test],
+                "cpu_seconds": serial.seconds[test],
+                "compositions_per_second": tested / serial.seconds[test] if serial.seconds[test] else None,
+            }
+        )
         tested -= serial.removed[test]
-    rows.append({"stage": "model building", "compositions_tested": serial.checked - serial.removed["reach"],
-                 "removed": 0, "cpu_seconds": serial.seconds["model"],
-                 "compositions_per_second": (serial.checked - serial.removed["reach"]) / serial.seconds["model"]})
-    for label, summary, wall, jobs in (("cascade, --jobs 1", serial, serial_wall, 1),
-                                       (f"cascade, --jobs {cores}", parallel, parallel_wall, cores)):
-        rows.append({"stage": label, "compositions_tested": summary.checked, "removed": summary.checked - len(summary.survivors),
-                     "cpu_seconds": wall, "compositions_per_second": summary.checked / wall})
+    rows.append(
+        {
+            "stage": "model building",
+            "compositions_tested": serial.checked - serial.removed["reach"],
+            "removed": 0,
+            "cpu_seconds": serial.seconds["model"],
+            "compositions_per_second": (serial.checked - serial.removed["reach"]) / serial.seconds["model"],
+        }
+    )
+    for label, summary, wall, _jobs in (
+        ("cascade, --jobs 1", serial, serial_wall, 1),
+        (f"cascade, --jobs {cores}", parallel, parallel_wall, cores),
+    ):
+        rows.append(
+            {
+                "stage": label,
+                "compositions_tested": summary.checked,
+                "removed": summary.checked - len(summary.survivors),
+                "cpu_seconds": wall,
+                "compositions_per_second": summary.checked / wall,
+            }
+        )
 
     payloads = []
     for payload in (0.5, 5.0, 50.0):
         variant = dataclasses.replace(scenario, task=dataclasses.replace(scenario.task, payload=payload))
         summary, wall = run(variant, ProcessEngine(cores))
-        payloads.append({"payload_kg": payload, **{f"removed_{t}": summary.removed[t] for t in TEST_NAMES},
-                         "feasible": len(summary.survivors), "best_failed_torque_ratio": summary.best_torque_ratio,
-                         "wall_seconds": wall})
+        payloads.append(
+            {
+                "payload_kg": payload,
+                **{f"removed_{t}": summary.removed[t] for t in TEST_NAMES},
+                "feasible": len(summary.survivors),
+                "best_failed_torque_ratio": summary.best_torque_ratio,
+                "wall_seconds": wall,
+            }
+        )
 
     default = FeasibilitySettings()
     thorough_settings = dataclasses.replace(default, seeds=4 * default.seeds)
@@ -61,13 +88,24 @@ def main() -> None:
     kept = {v.composition.name for v in parallel.survivors}
     kept_thorough = {v.composition.name for v in thorough.survivors}
     thoroughness = {
-        "default_seeds": default.seeds, "thorough_seeds": thorough_settings.seeds, "escalation": default.escalation,
-        "default_survivors": len(kept), "thorough_survivors": len(kept_thorough),
-        "lost_by_default": sorted(kept_thorough - kept), "only_in_default": sorted(kept - kept_thorough),
+        "default_seeds": default.seeds,
+        "thorough_seeds": thorough_settings.seeds,
+        "escalation": default.escalation,
+        "default_survivors": len(kept),
+        "thorough_survivors": len(kept_thorough),
+        "lost_by_default": sorted(kept_thorough - kept),
+        "only_in_default": sorted(kept - kept_thorough),
         "thorough_wall_seconds": thorough_wall,
     }
-    path = write("feasibility", rows, {"payloads": payloads, "thoroughness": thoroughness,
-                                        "wall_seconds": {"jobs_1": serial_wall, f"jobs_{cores}": parallel_wall}})
+    path = write(
+        "feasibility",
+        rows,
+        {
+            "payloads": payloads,
+            "thoroughness": thoroughness,
+            "wall_seconds": {"jobs_1": serial_wall, f"jobs_{cores}": parallel_wall},
+        },
+    )
     print(table(rows))
     print(table(payloads))
     print(table([{k: v for k, v in thoroughness.items() if not isinstance(v, list)}]))

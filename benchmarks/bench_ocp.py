@@ -14,14 +14,14 @@ import numpy as np
 import pinocchio as pin
 
 from modular_robots import load_scenario
-from modular_robots.ocp.candidate import CandidateSpec, make_candidate
-from modular_robots.pipeline import candidate_specs
 from modular_robots.execution import ProcessEngine, available_cores
 from modular_robots.feasibility import filter_compositions
-from modular_robots.robot import RobotModel
-from modular_robots.scenario import OptimizerSettings
+from modular_robots.ocp.candidate import CandidateSpec, make_candidate
 from modular_robots.ocp.shooting import ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
+from modular_robots.pipeline import candidate_specs
+from modular_robots.robot import RobotModel
+from modular_robots.scenario import OptimizerSettings
 
 from ._common import table, write
 
@@ -43,12 +43,20 @@ def _row(name, dof, transcription, runs):
     results = [r for r, _ in runs]
     r = results[0]
     v = r.verification
-    return {"composition": name, "dof": dof, "transcription": transcription, "status": r.status,
-            "median_s": statistics.median(s for _, s in runs), "runs": len(runs), "iterations": r.iterations,
-            "substeps": r.substeps, "tf_s": r.tf if r.status == "optimal" else None,
-            "terminal_error_mm": v.terminal_error * 1e3 if v else None,
-            "min_clearance_m": v.min_clearance if v else None,
-            "reason": "" if r.status == "optimal" else r.reason[:70]}
+    return {
+        "composition": name,
+        "dof": dof,
+        "transcription": transcription,
+        "status": r.status,
+        "median_s": statistics.median(s for _, s in runs),
+        "runs": len(runs),
+        "iterations": r.iterations,
+        "substeps": r.substeps,
+        "tf_s": r.tf if r.status == "optimal" else None,
+        "terminal_error_mm": v.terminal_error * 1e3 if v else None,
+        "min_clearance_m": v.min_clearance if v else None,
+        "reason": "" if r.status == "optimal" else r.reason[:70],
+    }
 
 
 def _converge_chunk(context, chunk):
@@ -56,9 +64,18 @@ def _converge_chunk(context, chunk):
     out = []
     for spec in chunk:
         result, seconds = _solve(scenario, spec, transcription)
-        out.append({"composition": spec.verdict.composition.name, "boundary_pair": spec.boundary_pair,
-                    "dof": spec.verdict.composition.dof, "status": result.status, "seconds": seconds,
-                    "iterations": result.iterations, "tf": result.tf, "reason": result.reason})
+        out.append(
+            {
+                "composition": spec.verdict.composition.name,
+                "boundary_pair": spec.boundary_pair,
+                "dof": spec.verdict.composition.dof,
+                "status": result.status,
+                "seconds": seconds,
+                "iterations": result.iterations,
+                "tf": result.tf,
+                "reason": result.reason,
+            }
+        )
     return out
 
 
@@ -66,8 +83,7 @@ def _one_dof_robot() -> RobotModel:
     model = pin.Model()
     joint = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "joint_1")
     model.appendBodyToJoint(joint, pin.Inertia(1.0, np.zeros(3), np.diag([1.0, 1.0, 1.0])), pin.SE3.Identity())
-    model.addFrame(pin.Frame("tool0", joint, 0, pin.SE3(np.eye(3), np.array([0.5, 0.0, 0.0])),
-                             pin.FrameType.OP_FRAME))
+    model.addFrame(pin.Frame("tool0", joint, 0, pin.SE3(np.eye(3), np.array([0.5, 0.0, 0.0])), pin.FrameType.OP_FRAME))
     model.gravity.linear[:] = 0.0
     model.lowerPositionLimit[:] = -10.0
     model.upperPositionLimit[:] = 10.0
@@ -82,9 +98,17 @@ def exact_vs_finite_difference() -> list[dict]:
     for jacobian in ("exact", "finite-difference"):
         start = time.perf_counter()
         outcome = ShootingSolver(problem, jacobian=jacobian).solve()
-        rows.append({"case": "1-DOF bang-bang, 8 intervals", "jacobian": jacobian, "status": outcome.status,
-                     "iterations": outcome.iterations, "seconds": time.perf_counter() - start,
-                     "tf_s": outcome.final.tf if outcome.final else None, "tf_exact_s": 2.0})
+        rows.append(
+            {
+                "case": "1-DOF bang-bang, 8 intervals",
+                "jacobian": jacobian,
+                "status": outcome.status,
+                "iterations": outcome.iterations,
+                "seconds": time.perf_counter() - start,
+                "tf_s": outcome.final.tf if outcome.final else None,
+                "tf_exact_s": 2.0,
+            }
+        )
     return rows
 
 
@@ -92,7 +116,7 @@ def main() -> None:
     scenario = load_scenario(SCENARIO)
     survivors = sorted((v for v in filter_compositions(scenario) if v.passed), key=lambda v: v.time_bound)
     chosen = [v for v in survivors if v.composition.name == NAMED]
-    chosen += [v for v in survivors if v.composition.name != NAMED][:SET_SIZE - 1]
+    chosen += [v for v in survivors if v.composition.name != NAMED][: SET_SIZE - 1]
 
     rows = []
     for verdict in chosen:
@@ -103,8 +127,10 @@ def main() -> None:
     print(table(rows))
 
     share = {}
-    for transcription, specs in (("inverse", list(candidate_specs(survivors))),
-                                 ("forward", [CandidateSpec(v.composition, v.q_start, v.q_goal) for v in chosen])):
+    for transcription, specs in (
+        ("inverse", list(candidate_specs(survivors))),
+        ("forward", [CandidateSpec(v.composition, v.q_start, v.q_goal) for v in chosen]),
+    ):
         engine = ProcessEngine(available_cores())
         start = time.perf_counter()
         outcomes = list(engine.map_chunks(_converge_chunk, (scenario, transcription), specs, chunksize=1))
@@ -113,26 +139,39 @@ def main() -> None:
         verified = {o["composition"] for o in outcomes if o["status"] == "optimal"}
         converged = [o for o in outcomes if o["status"] == "optimal"]
         share[transcription] = {
-            "compositions": len(compositions), "compositions_converged": len(verified),
-            "candidates": len(outcomes), "converged": len(converged),
-            "share": len(verified) / len(compositions), "wall_seconds": wall,
+            "compositions": len(compositions),
+            "compositions_converged": len(verified),
+            "candidates": len(outcomes),
+            "converged": len(converged),
+            "share": len(verified) / len(compositions),
+            "wall_seconds": wall,
             "median_seconds": statistics.median(o["seconds"] for o in outcomes),
             "median_seconds_5dof": statistics.median(
-                [o["seconds"] for o in outcomes if o["dof"] == 5] or [float("nan")]),
+                [o["seconds"] for o in outcomes if o["dof"] == 5] or [float("nan")]
+            ),
             "median_iterations": statistics.median(o["iterations"] for o in outcomes),
             "failures": [o for o in outcomes if o["status"] != "optimal"],
             "compositions_failed": sorted(compositions - verified),
         }
-        print(f"{transcription}: {len(verified)} of {len(compositions)} compositions and {len(converged)} of "
-              f"{len(outcomes)} candidates converge and verify "
-              f"({wall:.1f} s wall on {engine.jobs} workers; median {share[transcription]['median_seconds']:.2f} s "
-              f"per candidate)")
+        print(
+            f"{transcription}: {len(verified)} of {len(compositions)} compositions and {len(converged)} of "
+            f"{len(outcomes)} candidates converge and verify "
+            f"({wall:.1f} s wall on {engine.jobs} workers; median {share[transcription]['median_seconds']:.2f} s "
+            f"per candidate)"
+        )
 
     fd_rows = exact_vs_finite_difference()
     print(table(fd_rows))
-    path = write("ocp", rows, {"convergence": share, "jacobians": fd_rows,
-                               "note": "median_s is the whole Candidate.solve (solve, verify, refine) per run; "
-                                       "forward rows are one run each"})
+    path = write(
+        "ocp",
+        rows,
+        {
+            "convergence": share,
+            "jacobians": fd_rows,
+            "note": "median_s is the whole Candidate.solve (solve, verify, refine) per run; "
+            "forward rows are one run each",
+        },
+    )
     print(f"wrote {path}")
 
 

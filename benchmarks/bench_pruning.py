@@ -4,17 +4,16 @@ own — optimizer iterations, wall time, winner agreement, and when candidates w
 from __future__ import annotations
 
 from collections import Counter
-from pathlib import Path
-
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 from modular_robots import load_scenario
-from modular_robots.pipeline import run_scenario, with_pruning
-from modular_robots.pruning import PruningManager
 from modular_robots.ocp.candidate import CandidateStatus
 from modular_robots.ocp.solver import Iterate
+from modular_robots.pipeline import run_scenario, with_pruning
+from modular_robots.pruning import PruningManager
 
 from ._common import table, write
 
@@ -26,14 +25,21 @@ def _summary(result) -> dict:
     statuses = Counter(c.status for c in result.candidates)
     optimal = [c.cost for c in result.candidates if c.status == "optimal"]
     return {
-        "winner": result.winner.name, "winner_cost": result.winner.cost, "iterations": result.iterations,
-        "rounds": result.rounds, "optimization_s": result.seconds["optimization"],
-        "feasibility_s": result.seconds["feasibility"], "compositions": len(result.feasibility.survivors),
+        "winner": result.winner.name,
+        "winner_cost": result.winner.cost,
+        "iterations": result.iterations,
+        "rounds": result.rounds,
+        "optimization_s": result.seconds["optimization"],
+        "feasibility_s": result.seconds["feasibility"],
+        "compositions": len(result.feasibility.survivors),
         "candidates": len(result.candidates),
-        "optimal": statuses["optimal"], "pruned": statuses["pruned"], "failed": statuses["failed"],
+        "optimal": statuses["optimal"],
+        "pruned": statuses["pruned"],
+        "failed": statuses["failed"],
         "worst_optimal_cost": max(optimal),
-        "pruned_at": dict(sorted(Counter(c.pruned_at_iteration for c in result.candidates
-                                         if c.status == "pruned").items())),
+        "pruned_at": dict(
+            sorted(Counter(c.pruned_at_iteration for c in result.candidates if c.status == "pruned").items())
+        ),
     }
 
 
@@ -62,8 +68,17 @@ class _Replay:
             r, k = self.results[name], self.step[name]
             if k < len(r.cost_history):
                 self.step[name] = k + 1
-                out[name] = (False, Iterate(k + 1, r.cost_history[k], r.violation_history[k], r.cost_history[k],
-                                            np.empty(0), cost_bound=r.cost_bound))
+                out[name] = (
+                    False,
+                    Iterate(
+                        k + 1,
+                        r.cost_history[k],
+                        r.violation_history[k],
+                        r.cost_history[k],
+                        np.empty(0),
+                        cost_bound=r.cost_bound,
+                    ),
+                )
             else:
                 out[name] = (True, r)
         return out
@@ -83,9 +98,16 @@ def hindsight(brute, threshold: float, start_iteration: int) -> dict:
     best = brute.winner.cost
     kept = [r for r in brute.candidates if r.status == "optimal" and r.cost <= (1.0 + threshold) * best]
     used = sum(len(r.cost_history) for r in kept) + sum(
-        min(start_iteration, len(r.cost_history)) for r in brute.candidates if r not in kept)
-    return {"guard": "hindsight", "threshold": threshold, "iterations": used, "saving_x": total / used,
-            "same_winner": True, "pruned": len(brute.candidates) - len(kept)}
+        min(start_iteration, len(r.cost_history)) for r in brute.candidates if r not in kept
+    )
+    return {
+        "guard": "hindsight",
+        "threshold": threshold,
+        "iterations": used,
+        "saving_x": total / used,
+        "same_winner": True,
+        "pruned": len(brute.candidates) - len(kept),
+    }
 
 
 def replay(brute, scenario) -> list[dict]:
@@ -102,8 +124,16 @@ def replay(brute, scenario) -> list[dict]:
             used = sum(r.iterations if r.status != "pruned" else r.pruned_at_iteration for r in results)
             optimal = [r for r in results if r.status == "optimal"]
             winner = min(optimal, key=lambda r: (r.cost, r.name)).name
-            rows.append({"guard": guard, "threshold": threshold, "iterations": used, "saving_x": total / used,
-                         "same_winner": winner == truth, "pruned": sum(r.status == "pruned" for r in results)})
+            rows.append(
+                {
+                    "guard": guard,
+                    "threshold": threshold,
+                    "iterations": used,
+                    "saving_x": total / used,
+                    "same_winner": winner == truth,
+                    "pruned": sum(r.status == "pruned" for r in results),
+                }
+            )
     return rows
 
 
@@ -116,22 +146,36 @@ def main() -> None:
         brute = _summary(brute_run)
         details[name] = {"ratio": ratio, "none": brute, "replayed_thresholds": replay(brute_run, scenario)}
         print(table(details[name]["replayed_thresholds"]))
-        rows.append({
-            "scenario": name, "feasible": brute["compositions"], "candidates": brute["candidates"],
-            "winner_ratio": ratio["winner"],
-            "same_winner": ratio["winner"] == brute["winner"], "tf_s": ratio["winner_cost"],
-            "iterations_ratio": ratio["iterations"], "iterations_none": brute["iterations"],
-            "iteration_saving_x": brute["iterations"] / ratio["iterations"],
-            "wall_ratio_s": ratio["optimization_s"], "wall_none_s": brute["optimization_s"],
-            "wall_saving_x": brute["optimization_s"] / ratio["optimization_s"],
-            "pruned": ratio["pruned"], "failed_none": brute["failed"],
-            "best_to_worst": brute["winner_cost"] / brute["worst_optimal_cost"],
-        })
+        rows.append(
+            {
+                "scenario": name,
+                "feasible": brute["compositions"],
+                "candidates": brute["candidates"],
+                "winner_ratio": ratio["winner"],
+                "same_winner": ratio["winner"] == brute["winner"],
+                "tf_s": ratio["winner_cost"],
+                "iterations_ratio": ratio["iterations"],
+                "iterations_none": brute["iterations"],
+                "iteration_saving_x": brute["iterations"] / ratio["iterations"],
+                "wall_ratio_s": ratio["optimization_s"],
+                "wall_none_s": brute["optimization_s"],
+                "wall_saving_x": brute["optimization_s"] / ratio["optimization_s"],
+                "pruned": ratio["pruned"],
+                "failed_none": brute["failed"],
+                "best_to_worst": brute["winner_cost"] / brute["worst_optimal_cost"],
+            }
+        )
         print(table(rows[-1:]))
     print(table(rows))
-    path = write("pruning", rows, {"details": details,
-                                   "note": "wall = steps C+D (lockstep optimisation) on all cores; step B is "
-                                           "identical for both rules and reported per run in details"})
+    path = write(
+        "pruning",
+        rows,
+        {
+            "details": details,
+            "note": "wall = steps C+D (lockstep optimisation) on all cores; step B is "
+            "identical for both rules and reported per run in details",
+        },
+    )
     print(f"wrote {path}")
 
 

@@ -42,9 +42,7 @@ def _construct_map(loader: _LineLoader, node: yaml.MappingNode) -> _Map:
     for key_node, value_node in node.value:
         key = loader.construct_object(key_node, deep=True)
         if key in out:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r}", key_node.start_mark
-            )
+            raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
         out[key] = loader.construct_object(value_node, deep=True)
         out.key_lines[key] = key_node.start_mark.line + 1
     return out
@@ -68,7 +66,7 @@ def load_yaml(path: Path, error: type[InputError]) -> Fields:
     except OSError as exc:
         raise error(f"{path}: cannot read file: {exc.strerror or exc}") from None
     try:
-        data = yaml.load(text, Loader=_LineLoader)  # noqa: S506 (SafeLoader subclass)
+        data = yaml.load(text, Loader=_LineLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
@@ -137,9 +135,7 @@ class Fields:
         self._read.add(key)
         if key not in self._data:
             if default is _MISSING:
-                raise self._error(
-                    f"{self.path}:{self._data.line}: {self.key_path(key)}: missing required key"
-                )
+                raise self._error(f"{self.path}:{self._data.line}: {self.key_path(key)}: missing required key")
             return default
         return self._data[key]
 
@@ -242,5 +238,3 @@ class Fields:
         if exclusive_minimum is not None and value <= exclusive_minimum:
             raise self.fail(key, f"{what}expected a number > {exclusive_minimum:g}, got {value:g}")
         return value
-
-

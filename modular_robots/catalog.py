@@ -97,8 +97,7 @@ class Catalog:
             return self._by_id[module_id]
         except KeyError:
             raise CatalogError(
-                f"unknown module {module_id!r} in catalogue {self.name!r} "
-                f"(known: {', '.join(self._by_id)})"
+                f"unknown module {module_id!r} in catalogue {self.name!r} (known: {', '.join(self._by_id)})"
             ) from None
 
     def of_kind(self, kind: Kind) -> tuple[Module, ...]:
@@ -141,9 +140,9 @@ def catalog_from_fields(top: Fields) -> Catalog:
     for kind in KINDS:
         if kind != "link" and not any(m.kind == kind for m in modules):
             raise top.fail("modules", f"expected at least one module of kind {kind!r}")
-    if grammar.links_after_joint[1] > 0 or grammar.links_after_base[1] > 0:
-        if not any(m.kind == "link" for m in modules):
-            raise top.fail("grammar", "the grammar asks for links but no module is of kind 'link'")
+    wants_links = grammar.links_after_joint[1] > 0 or grammar.links_after_base[1] > 0
+    if wants_links and not any(m.kind == "link" for m in modules):
+        raise top.fail("grammar", "the grammar asks for links but no module is of kind 'link'")
     return Catalog(name=name, modules=tuple(modules), grammar=grammar, source=str(top.path))
 
 
@@ -182,10 +181,8 @@ def _read_module(f: Fields) -> Module:
         f.check("joint", not f.has("joint"), f"a {kind} module has no joint; remove the key")
     length = f.number("length", default=0.0, minimum=0.0)
     diameter = f.number("diameter", exclusive_minimum=0.0)
-    if kind == "base":
-        mass = f.number("mass", default=0.0, minimum=0.0)
-    else:
-        mass = f.number("mass", exclusive_minimum=0.0)
+    # a base may be massless (it never moves); a moving module may not
+    mass = f.number("mass", default=0.0, minimum=0.0) if kind == "base" else f.number("mass", exclusive_minimum=0.0)
     com, inertia = _read_inertia(f, mass, diameter, length)
     limits = None
     if joint != "fixed":
@@ -198,9 +195,19 @@ def _read_module(f: Fields) -> Module:
     twist_out = math.radians(f.number("twist_out_deg", default=0.0))
     f.done()
     return Module(
-        id=module_id, kind=kind, joint=joint, length=length, diameter=diameter, mass=mass,
-        com=com, inertia=inertia, twist_in=twist_in, twist_out=twist_out, limits=limits,
-        armature=armature, collision=collision,
+        id=module_id,
+        kind=kind,
+        joint=joint,
+        length=length,
+        diameter=diameter,
+        mass=mass,
+        com=com,
+        inertia=inertia,
+        twist_in=twist_in,
+        twist_out=twist_out,
+        limits=limits,
+        armature=armature,
+        collision=collision,
     )
 
 
@@ -223,7 +230,11 @@ def _read_inertia(f: Fields, mass: float, diameter: float, length: float):
     moments = tuple(moments) + (0.0,) * (6 - len(moments))
     ixx, iyy, izz = moments[:3]
     valid = min(ixx, iyy, izz) > 0 and ixx + iyy >= izz and iyy + izz >= ixx and izz + ixx >= iyy
-    f.check("inertia", valid, f"expected positive principal moments that satisfy the triangle inequality, got {list(moments[:3])}")
+    f.check(
+        "inertia",
+        valid,
+        f"expected positive principal moments that satisfy the triangle inequality, got {list(moments[:3])}",
+    )
     return com, moments
 
 

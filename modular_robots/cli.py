@@ -67,12 +67,22 @@ def enumerate_command(source: Path, count: bool, dof: int | None) -> None:
 
 @main.command("urdf")
 @click.argument("composition")
-@click.option("--scenario", "source", type=_existing_file, required=True,
-              help="Scenario (payload from its task) or catalogue file.")
-@click.option("--payload", type=click.FloatRange(min=0.0), default=None,
-              help="Payload [kg]; default: the scenario's, or 0 for a catalogue.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="URDF file to write.")
+@click.option(
+    "--scenario",
+    "source",
+    type=_existing_file,
+    required=True,
+    help="Scenario (payload from its task) or catalogue file.",
+)
+@click.option(
+    "--payload",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    help="Payload [kg]; default: the scenario's, or 0 for a catalogue.",
+)
+@click.option(
+    "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="URDF file to write."
+)
 @_user_errors
 def urdf_command(composition: str, source: Path, payload: float | None, output: Path) -> None:
     """Write the URDF of COMPOSITION (e.g. B-J1-L2-E1), payload at tool0."""
@@ -86,12 +96,28 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 
 @main.command("filter")
 @click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
-@click.option("--jobs", "-j", type=click.IntRange(min=0), default=0, show_default="all cores",
-              help="Worker processes (1: run in this process).")
-@click.option("--seeds", type=click.IntRange(min=1), default=FeasibilitySettings.seeds, show_default=True,
-              help="IK start configurations per target.")
-@click.option("--out", "out", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Write the verdict summary and the survivors with their boundary configurations as JSON.")
+@click.option(
+    "--jobs",
+    "-j",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default="all cores",
+    help="Worker processes (1: run in this process).",
+)
+@click.option(
+    "--seeds",
+    type=click.IntRange(min=1),
+    default=FeasibilitySettings.seeds,
+    show_default=True,
+    help="IK start configurations per target.",
+)
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Write the verdict summary and the survivors with their boundary configurations as JSON.",
+)
 @_user_errors
 def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None) -> None:
     """Step B: which compositions can hold the start and the goal (reach, IK, torque, collision)."""
@@ -101,15 +127,18 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None)
     total = sum(count_compositions(scenario.catalog).values())
     summary = FeasibilitySummary()
     start = time.perf_counter()
-    with click.progressbar(length=total, label=f"step B on {total} compositions", file=sys.stderr,
-                           show_pos=True) as bar:
+    with click.progressbar(
+        length=total, label=f"step B on {total} compositions", file=sys.stderr, show_pos=True
+    ) as bar:
         for verdict in filter_compositions(scenario, engine=engine, settings=settings):
             summary.add(verdict)
             bar.update(1)
     wall = time.perf_counter() - start
     click.echo(_feasibility_table(summary))
-    click.echo(f"{len(summary.survivors)} of {summary.checked} compositions are feasible "
-               f"({wall:.1f} s wall, {engine.jobs} worker(s))")
+    click.echo(
+        f"{len(summary.survivors)} of {summary.checked} compositions are feasible "
+        f"({wall:.1f} s wall, {engine.jobs} worker(s))"
+    )
     if summary.survivors:
         click.echo(_survivor_table(summary))
     if out is not None:
@@ -122,15 +151,23 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None)
 @main.command("optimize")
 @click.argument("composition")
 @click.option("--scenario", "scenario_path", type=_existing_file, required=True, help="Scenario file.")
-@click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), required=True,
-              help="Results folder (created if missing).")
-@click.option("--transcription", type=click.Choice(TRANSCRIPTIONS), default=None,
-              help="Override the scenario's transcription.")
-@click.option("--max-iterations", type=click.IntRange(min=1), default=None,
-              help="Override the scenario's iteration limit.")
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Results folder (created if missing).",
+)
+@click.option(
+    "--transcription", type=click.Choice(TRANSCRIPTIONS), default=None, help="Override the scenario's transcription."
+)
+@click.option(
+    "--max-iterations", type=click.IntRange(min=1), default=None, help="Override the scenario's iteration limit."
+)
 @_user_errors
-def optimize_command(composition: str, scenario_path: Path, out: Path, transcription: str | None,
-                     max_iterations: int | None) -> None:
+def optimize_command(
+    composition: str, scenario_path: Path, out: Path, transcription: str | None, max_iterations: int | None
+) -> None:
     """Step C for one COMPOSITION: a verified minimum-cost trajectory and its results folder.
 
     A composition whose fastest IK pair's straight line passes an obstacle is optimised from its
@@ -141,42 +178,76 @@ def optimize_command(composition: str, scenario_path: Path, out: Path, transcrip
     overrides = {k: v for k, v in (("transcription", transcription), ("max_iterations", max_iterations)) if v}
     scenario = replace(scenario, optimizer=replace(scenario.optimizer, **overrides))
     with _LiveLine() as live:
+
         def progress(name, it):
-            live.show(f"{name}: iteration {it.iteration}  {scenario.task.cost} {it.cost:.4g}  "
-                      f"tf {it.tf:.3f} s  violation {it.constraint_violation:.1e}")
+            live.show(
+                f"{name}: iteration {it.iteration}  {scenario.task.cost} {it.cost:.4g}  "
+                f"tf {it.tf:.3f} s  violation {it.constraint_violation:.1e}"
+            )
 
         run = optimize_composition(scenario, composition, out, on_iterate=progress)
     result = run.winner
     for other in run.candidates:
         if other is not result:
-            click.echo(f"{other.name}: {other.status}, cost {other.cost:.4g}, {other.iterations} iterations, "
-                       f"{other.seconds:.2f} s", err=True)
+            click.echo(
+                f"{other.name}: {other.status}, cost {other.cost:.4g}, {other.iterations} iterations, "
+                f"{other.seconds:.2f} s",
+                err=True,
+            )
     v = result.verification
-    click.echo(f"{result.name}: tf = {result.tf:.4f} s, cost {result.cost:.4g}, {result.iterations} iterations, "
-               f"{result.seconds:.2f} s, {result.substeps} sub-steps per interval")
-    click.echo(f"verified: terminal error {v.terminal_error * 1000:.3f} mm, min clearance {v.min_clearance:.4f} m, "
-               f"velocity {v.velocity_ratio:.3f} x limit, torque {v.torque_ratio:.3f} x limit")
+    click.echo(
+        f"{result.name}: tf = {result.tf:.4f} s, cost {result.cost:.4g}, {result.iterations} iterations, "
+        f"{result.seconds:.2f} s, {result.substeps} sub-steps per interval"
+    )
+    click.echo(
+        f"verified: terminal error {v.terminal_error * 1000:.3f} mm, min clearance {v.min_clearance:.4f} m, "
+        f"velocity {v.velocity_ratio:.3f} x limit, torque {v.torque_ratio:.3f} x limit"
+    )
     click.echo(f"wrote {_written(out)}")
 
 
 @main.command("run")
 @click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
-@click.option("--out", "out", type=click.Path(file_okay=False, path_type=Path), default=None,
-              show_default="results/<scenario name>", help="Results folder (created if missing).")
+@click.option(
+    "--out",
+    "out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    show_default="results/<scenario name>",
+    help="Results folder (created if missing).",
+)
 @click.option("--rule", type=click.Choice(RULES), default=None, help="Override the scenario's pruning rule.")
-@click.option("--threshold", type=click.FloatRange(min=0.0, min_open=True), default=None,
-              help="Override the ratio rule's threshold.")
-@click.option("--jobs", "-j", type=click.IntRange(min=0), default=0, show_default="all cores",
-              help="Worker processes (1: run in this process).")
+@click.option(
+    "--threshold",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Override the ratio rule's threshold.",
+)
+@click.option(
+    "--jobs",
+    "-j",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default="all cores",
+    help="Worker processes (1: run in this process).",
+)
 @_user_errors
 def run_command(scenario_path: Path, out: Path | None, rule: str | None, threshold: float | None, jobs: int) -> None:
     """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
     scenario = with_pruning(load_scenario(scenario_path), rule, threshold)
     out = out or Path("results") / scenario.name
-    click.echo(f"{scenario.name}: rule {scenario.pruning.rule}"
-               + (f" (threshold {scenario.pruning.threshold:g} from iteration {scenario.pruning.start_iteration})"
-                  if scenario.pruning.rule == "ratio" else "") + f"; results in {out}", err=True)
+    click.echo(
+        f"{scenario.name}: rule {scenario.pruning.rule}"
+        + (
+            f" (threshold {scenario.pruning.threshold:g} from iteration {scenario.pruning.start_iteration})"
+            if scenario.pruning.rule == "ratio"
+            else ""
+        )
+        + f"; results in {out}",
+        err=True,
+    )
     with _LiveLine() as live:
+
         def progress(stage, f):
             if stage == "feasibility":
                 if f["checked"] % 50 == 0:
@@ -184,8 +255,10 @@ def run_command(scenario_path: Path, out: Path | None, rule: str | None, thresho
             else:
                 best = "-" if f["best_optimal"] is None else f"{f['best_optimal']:.4g}"
                 reference = "-" if f["best_cost"] is None else f"{f['best_cost']:.4g}"
-                live.show(f"steps C+D: iteration {f['round']}, {f['alive']} of {f['total']} alive, best verified "
-                          f"cost {best}, pruning reference {reference}")
+                live.show(
+                    f"steps C+D: iteration {f['round']}, {f['alive']} of {f['total']} alive, best verified "
+                    f"cost {best}, pruning reference {reference}"
+                )
 
         result = run_scenario(scenario, out, jobs, on_progress=progress)
     click.echo(_run_table(result, scenario))
@@ -204,17 +277,26 @@ def _run_table(result, scenario) -> str:
     statuses = [c.status for c in result.candidates]
     v = w.verification
     rows = [
-        ("winner", w.composition + ("" if w.boundary_pair == BoundaryPair.FASTEST else f" (from its {w.boundary_pair} "
-                                                                              "boundary pair)")),
+        (
+            "winner",
+            w.composition
+            + ("" if w.boundary_pair == BoundaryPair.FASTEST else f" (from its {w.boundary_pair} boundary pair)"),
+        ),
         ("tf [s]", f"{w.tf:.4f}"),
         (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
-        ("verification", f"terminal error {v.terminal_error * 1000:.3f} mm, min clearance "
-                         f"{v.min_clearance:.4f} m, {w.substeps} sub-steps"),
+        (
+            "verification",
+            f"terminal error {v.terminal_error * 1000:.3f} mm, min clearance "
+            f"{v.min_clearance:.4f} m, {w.substeps} sub-steps",
+        ),
         ("compositions", f"{result.feasibility.checked} enumerated, {len(result.feasibility.survivors)} feasible"),
-        ("candidates", f"{len(statuses)} optimised ({len(result.feasibility.survivors)} compositions, "
-                       f"{sum(c.boundary_pair == BoundaryPair.CLEAR for c in result.candidates)} also from a clear pair): "
-                       f"{statuses.count('optimal')} optimal, "
-                       f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed"),
+        (
+            "candidates",
+            f"{len(statuses)} optimised ({len(result.feasibility.survivors)} compositions, "
+            f"{sum(c.boundary_pair == BoundaryPair.CLEAR for c in result.candidates)} also from a clear pair): "
+            f"{statuses.count('optimal')} optimal, "
+            f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed",
+        ),
         ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),
         ("wall time [s]", ", ".join(f"{k} {s:.1f}" for k, s in result.seconds.items())),
     ]
@@ -262,8 +344,10 @@ def _survivor_table(summary: FeasibilitySummary, limit: int = 25) -> str:
     ranked = sorted(summary.survivors, key=lambda v: v.time_bound)
     lines = [f"{'composition':<34} {'dof':>3} {'time bound s':>12} {'torque ratio':>12} {'clearance m':>11}"]
     for v in ranked[:limit]:
-        lines.append(f"{v.composition.name:<34} {v.composition.dof:>3} {v.time_bound:>12.3f} "
-                     f"{v.figures['torque_ratio']:>12.3f} {v.figures['clearance']:>11.3f}")
+        lines.append(
+            f"{v.composition.name:<34} {v.composition.dof:>3} {v.time_bound:>12.3f} "
+            f"{v.figures['torque_ratio']:>12.3f} {v.figures['clearance']:>11.3f}"
+        )
     if len(ranked) > limit:
         lines.append(f"... and {len(ranked) - limit} more (see --out)")
     return "\n".join(lines)
@@ -272,8 +356,12 @@ def _survivor_table(summary: FeasibilitySummary, limit: int = 25) -> str:
 def _feasibility_json(scenario, settings, summary, wall, jobs) -> dict:
     return {
         "scenario": scenario.name,
-        "settings": {"seeds": settings.seeds, "tolerance": settings.tolerance,
-                     "max_iterations": settings.max_iterations, "jobs": jobs},
+        "settings": {
+            "seeds": settings.seeds,
+            "tolerance": settings.tolerance,
+            "max_iterations": settings.max_iterations,
+            "jobs": jobs,
+        },
         "enumerated": summary.checked,
         "removed": summary.removed,
         "remaining": summary.remaining_after(),

@@ -6,6 +6,7 @@ spheres. Distances are signed: negative when the shapes overlap (penetration dep
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -44,8 +45,7 @@ class CollisionModel:
     ``robot.primitives``; default all of them).
     """
 
-    def __init__(self, robot: RobotModel, obstacles: Sequence[SphereObstacle],
-                 primitives: Sequence[int] | None = None):
+    def __init__(self, robot: RobotModel, obstacles: Sequence[SphereObstacle], primitives: Sequence[int] | None = None):
         self.robot = robot
         self.obstacles = tuple(obstacles)
         self.primitive_indices = tuple(range(len(robot.primitives)) if primitives is None else primitives)
@@ -66,7 +66,7 @@ class CollisionModel:
             for joint in model.supports[model.frames[fid].parentJoint]:
                 if joint > 0:
                     start = model.joints[joint].idx_v
-                    self._supports[i, start:start + model.joints[joint].nv] = True
+                    self._supports[i, start : start + model.joints[joint].nv] = True
         self._centers = np.array([o.center for o in self.obstacles], dtype=float).reshape(-1, 3)
         self._radii = np.array([o.radius for o in self.obstacles], dtype=float)
         self._obstacle_objects = [
@@ -89,8 +89,7 @@ class CollisionModel:
                 dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], rot[i][:, 2])
         return Distances(dist, on_robot, on_obstacle)
 
-    def _pair_distance(self, i: int, j: int, mid: np.ndarray,
-                       axis: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def _pair_distance(self, i: int, j: int, mid: np.ndarray, axis: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """Signed distance and witness points of primitive ``i``, placed (its FCL object) with its
         axis midpoint at ``mid`` along the unit ``axis``, and obstacle ``j``: FCL's while they are
         apart, :func:`penetration` when FCL reports an overlap."""
@@ -147,8 +146,9 @@ class CollisionModel:
         p = on_robot[rows, best, np.arange(len(centers))]  # (K, O, 3)
         normal = on_obstacle[rows, best, np.arange(len(centers))] - centers
         normal /= np.linalg.norm(normal, axis=2, keepdims=True)
-        grad = (np.einsum("koc,kcv->kov", normal, jac[:, :3])
-                + np.einsum("koc,kcv->kov", np.cross(p, normal), jac[:, 3:]))
+        grad = np.einsum("koc,kcv->kov", normal, jac[:, :3]) + np.einsum(
+            "koc,kcv->kov", np.cross(p, normal), jac[:, 3:]
+        )
         return closest, grad * self._supports[best]
 
     def _placements(self, qs: np.ndarray, jacobians: bool):
@@ -181,10 +181,7 @@ class CollisionModel:
         if not self.obstacles:
             return True
         s = np.linspace(0.0, 1.0, samples + 1)[:, None]
-        for a, b in zip(path[:-1], path[1:]):
-            if self.closest_many(a + s * (b - a))[0].min() < clearance:
-                return False
-        return True
+        return all(self.closest_many(a + s * (b - a))[0].min() >= clearance for a, b in itertools.pairwise(path))
 
     def in_collision(self, q: np.ndarray) -> bool:
         """True if any primitive touches or overlaps any obstacle."""
@@ -199,8 +196,9 @@ def _separation(a: fcl.CollisionObject, b: fcl.CollisionObject) -> tuple[float, 
     return d, np.asarray(result.nearest_points[0]), np.asarray(result.nearest_points[1])
 
 
-def penetration(mid: np.ndarray, axis: np.ndarray, length: float, radius: float, center: np.ndarray,
-                obstacle_radius: float) -> tuple[float, np.ndarray, np.ndarray]:
+def penetration(
+    mid: np.ndarray, axis: np.ndarray, length: float, radius: float, center: np.ndarray, obstacle_radius: float
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Signed distance [m] and witness points (on the primitive, on the obstacle) of a capsule
     (axis midpoint ``mid``, unit ``axis``, ``length``, ``radius``; a sphere when ``length`` is 0)
     and a sphere obstacle: the distance from the obstacle's centre to the capsule's axis segment,

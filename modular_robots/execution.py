@@ -164,8 +164,7 @@ class Executor(Protocol):
 class InProcessExecutor:
     """The jobs as generators in this process."""
 
-    def __init__(self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any],
-                 names: Sequence[str]):
+    def __init__(self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any], names: Sequence[str]):
         self._names = list(names)
         self._pending = dict(zip(self._names, specs))
         self._factory, self._context = factory, context
@@ -229,8 +228,9 @@ class ProcessExecutor:
     command, so the lockstep, and every decision taken on it, does not depend on the number of
     workers."""
 
-    def __init__(self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any],
-                 names: Sequence[str], jobs: int):
+    def __init__(
+        self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any], names: Sequence[str], jobs: int
+    ):
         self._names = list(names)
         jobs = max(1, min(jobs, len(self._names)))
         ctx = multiprocessing.get_context()
@@ -240,8 +240,11 @@ class ProcessExecutor:
         for w in range(jobs):
             mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, factory, context, [specs[i] for i in mine],
-                                                     [self._names[i] for i in mine]), daemon=True)
+            proc = ctx.Process(
+                target=_worker,
+                args=(child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
+                daemon=True,
+            )
             proc.start()
             child.close()
             self._conns.append(parent)
@@ -287,18 +290,21 @@ class ProcessExecutor:
 
     def shutdown(self) -> None:
         for conn in self._conns:
-            try:
+            with contextlib.suppress(BrokenPipeError, OSError):
                 conn.send(("exit", []))
-            except (BrokenPipeError, OSError):
-                pass
         for proc in self._procs:
             proc.join(timeout=10)
             if proc.is_alive():
                 proc.terminate()
 
 
-def make_executor(factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any], names: Sequence[str],
-                  jobs: int | None = None) -> Executor:
+def make_executor(
+    factory: Callable[[Any, Any], Any],
+    context: Any,
+    specs: Sequence[Any],
+    names: Sequence[str],
+    jobs: int | None = None,
+) -> Executor:
     """``jobs`` = 1: :class:`InProcessExecutor`; ``None`` or 0: a worker process per core."""
     jobs = jobs or available_cores()
     if jobs == 1:

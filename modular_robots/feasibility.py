@@ -47,6 +47,7 @@ __all__ = [
     "filter_compositions",
 ]
 
+
 @dataclass(frozen=True)
 class FeasibilityTest:
     """One test of the cascade: its ``name`` (as verdicts report it), its ``rank`` (the order it
@@ -59,10 +60,12 @@ class FeasibilityTest:
 
 
 REACH = FeasibilityTest("reach", 0, "reach_margin [m]", "tool distance bound from catalogue numbers")
-INVERSE_KINEMATICS = FeasibilityTest("inverse kinematics", 1, "ik_error [m]",
-                                     "position IK at start and goal within joint limits")
-STATIC_TORQUE = FeasibilityTest("static torque", 2, "torque_ratio",
-                                "gravity torque with the payload within effort limits")
+INVERSE_KINEMATICS = FeasibilityTest(
+    "inverse kinematics", 1, "ik_error [m]", "position IK at start and goal within joint limits"
+)
+STATIC_TORQUE = FeasibilityTest(
+    "static torque", 2, "torque_ratio", "gravity torque with the payload within effort limits"
+)
 COLLISION = FeasibilityTest("collision", 3, "clearance [m]", "every primitive clear of every obstacle")
 
 TESTS: tuple[FeasibilityTest, ...] = (REACH, INVERSE_KINEMATICS, STATIC_TORQUE, COLLISION)
@@ -115,12 +118,21 @@ class Verdict:
         return self.failed_test is None
 
     def to_json(self) -> dict:
-        out = {"composition": self.composition.name, "dof": self.composition.dof,
-               "passed": self.passed, "failed_test": self.failed_test, "message": self.message,
-               "figures": self.figures}
+        out = {
+            "composition": self.composition.name,
+            "dof": self.composition.dof,
+            "passed": self.passed,
+            "failed_test": self.failed_test,
+            "message": self.message,
+            "figures": self.figures,
+        }
         if self.passed:
-            out.update(q_start=list(self.q_start), q_goal=list(self.q_goal), time_bound=self.time_bound,
-                       clear_pair=[list(q) for q in self.clear_pair] if self.clear_pair else None)
+            out.update(
+                q_start=list(self.q_start),
+                q_goal=list(self.q_goal),
+                time_bound=self.time_bound,
+                clear_pair=[list(q) for q in self.clear_pair] if self.clear_pair else None,
+            )
         return out
 
 
@@ -164,8 +176,10 @@ def _torque_check(robot: RobotModel, q: np.ndarray, label: str) -> _Check:
     worst = int(np.argmax(ratios))
     torque = ratios * robot.effort_limit
     unit = "N" if robot.model.joints[worst + 1].shortname() == "JointModelPZ" else "N m"
-    message = (f"static torque {torque[worst]:.4g} {unit} > {robot.effort_limit[worst]:.4g} {unit} "
-               f"(joint {worst + 1}, {label})")
+    message = (
+        f"static torque {torque[worst]:.4g} {unit} > {robot.effort_limit[worst]:.4g} {unit} "
+        f"(joint {worst + 1}, {label})"
+    )
     return _Check(bool(ratios[worst] <= 1.0), float(ratios[worst]), message)
 
 
@@ -206,8 +220,11 @@ def check_composition(
     figures["reach_margin"] = reach - float(np.linalg.norm(far))
     clock.time(REACH.name, t0)
     if figures["reach_margin"] < 0.0:
-        return fail(REACH.name, f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
-                             f"the arm reaches at most {reach:.3f} m")
+        return fail(
+            REACH.name,
+            f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
+            f"the arm reaches at most {reach:.3f} m",
+        )
 
     t0 = time.perf_counter()
     robot = robot_model(composition, catalog, task.payload)
@@ -219,12 +236,14 @@ def check_composition(
     for label, target in targets.items():
         outcome = _target(robot, collision, target, label, seeds, settings, clock)
         if outcome.solutions and not outcome.kept and settings.escalation > 1:
-            more = ik_seeds(robot, settings.seeds * settings.escalation)[settings.seeds:]
+            more = ik_seeds(robot, settings.seeds * settings.escalation)[settings.seeds :]
             outcome = _target(robot, collision, target, label, more, settings, clock, outcome)
         figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
         if not outcome.solutions:
-            return fail(INVERSE_KINEMATICS.name, f"inverse kinematics: no solution within joint limits at "
-                                              f"the {label} (closest {outcome.error:.3g} m)")
+            return fail(
+                INVERSE_KINEMATICS.name,
+                f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m)",
+            )
         # the composition needs at least its best ratio at every target seen so far
         figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
         if not outcome.kept:
@@ -234,9 +253,17 @@ def check_composition(
     (q_start, q_goal), clear = _boundary_pair(robot, collision, passing["start"], passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
     figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
-    return Verdict(composition, None, "feasible", figures, clock.seconds, tuple(map(float, q_start)),
-                   tuple(map(float, q_goal)), robot.travel_time_bound(q_start, q_goal),
-                   tuple(tuple(map(float, q)) for q in clear) if clear else None)
+    return Verdict(
+        composition,
+        None,
+        "feasible",
+        figures,
+        clock.seconds,
+        tuple(map(float, q_start)),
+        tuple(map(float, q_goal)),
+        robot.travel_time_bound(q_start, q_goal),
+        tuple(tuple(map(float, q)) for q in clear) if clear else None,
+    )
 
 
 @dataclass
@@ -252,15 +279,17 @@ def _target(robot, collision, target, label, seeds, settings, clock, earlier=Non
     """IK from every seed, then torque and collision on every distinct new solution (the
     ``earlier`` outcome of the same target, if any, is extended)."""
     t0 = time.perf_counter()
-    runs = [solve_position_ik(robot, target, q0, tolerance=settings.tolerance,
-                              max_iterations=settings.max_iterations) for q0 in seeds]
+    runs = [
+        solve_position_ik(robot, target, q0, tolerance=settings.tolerance, max_iterations=settings.max_iterations)
+        for q0 in seeds
+    ]
     known = earlier.solutions if earlier else []
     solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
     clock.time(INVERSE_KINEMATICS.name, t0)
     error = min([r.error for r in runs] + ([earlier.error] if earlier else []))
     outcome = earlier or _TargetOutcome([], error, [], math.inf, None)
     outcome.solutions, outcome.error = solutions, error
-    for q in solutions[len(known):]:
+    for q in solutions[len(known) :]:
         t0 = time.perf_counter()
         torque = _torque_check(robot, q, label)
         clock.time(STATIC_TORQUE.name, t0)
@@ -354,8 +383,12 @@ class FeasibilitySummary:
 
     def counts(self) -> dict:
         """The step-B block of ``result.json``'s ``counts``."""
-        return {"enumerated": self.checked, "removed": dict(self.removed), "remaining_after": self.remaining_after(),
-                "feasible": len(self.survivors)}
+        return {
+            "enumerated": self.checked,
+            "removed": dict(self.removed),
+            "remaining_after": self.remaining_after(),
+            "feasible": len(self.survivors),
+        }
 
     def remaining_after(self) -> dict[str, int]:
         left, out = self.checked, {}
@@ -371,8 +404,9 @@ class FeasibilitySummary:
         last = next((t for t in reversed(TEST_NAMES) if self.removed[t]), None)
         if last is None:
             return "no composition was checked"
-        lines = [f"no composition is feasible: the last {self.removed[last]} candidate(s) were removed by "
-                 f"the {last} test"]
+        lines = [
+            f"no composition is feasible: the last {self.removed[last]} candidate(s) were removed by the {last} test"
+        ]
         if math.isfinite(self.best_torque_ratio):
             lines.append(f"best torque ratio found: {self.best_torque_ratio:.2f} x the limit ({self.best_torque_miss})")
         if math.isfinite(self.smallest_ik_error):

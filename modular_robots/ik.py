@@ -1,4 +1,4 @@
-"""Position inverse kinematics within joint limits (Levenberg–Marquardt on Pinocchio Jacobians).
+"""Position inverse kinematics within joint limits (Levenberg-Marquardt on Pinocchio Jacobians).
 
 Only the tool position is constrained (orientation is free, SPEC §1). Joints at a limit whose
 step would push them further out are frozen for that step (a one-pass active set), so a target
@@ -77,7 +77,7 @@ def solve_position_ik(
     target = np.asarray(target, dtype=float)
     q = np.clip(np.asarray(q0, dtype=float), lower, upper)
     best_q, best_error, since_best = q, math.inf, 0
-    for iteration in range(1, max_iterations + 1):
+    for iteration in range(1, max_iterations + 1):  # noqa: B007 - read after the loop
         jacobian = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
         error_vector = target - data.oMf[frame].translation
         error = math.sqrt(error_vector @ error_vector)
@@ -100,7 +100,7 @@ def solve_position_ik(
 
 
 def _lm_step(jacobian: np.ndarray, error_vector: np.ndarray, error: float) -> np.ndarray:
-    """Levenberg–Marquardt step ``(J^T J + w I)^-1 J^T e`` with ``w = |e|^2 / 2 + 1e-4``
+    """Levenberg-Marquardt step ``(J^T J + w I)^-1 J^T e`` with ``w = |e|^2 / 2 + 1e-4``
     (Sugihara 2011), in its 3 x 3 dual form ``J^T (J J^T + w I)^-1 e``.
 
     The symmetric positive definite 3 x 3 system is solved by Cramer's rule on scalars: this

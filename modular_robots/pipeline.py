@@ -65,13 +65,18 @@ def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
 
 def _status_counts(results: Iterable[CandidateResult]) -> dict[str, int]:
     statuses = [r.status for r in results]
-    return {str(s): statuses.count(s) for s in (CandidateStatus.PRUNED, CandidateStatus.FAILED,
-                                                  CandidateStatus.OPTIMAL)}
+    return {
+        str(s): statuses.count(s) for s in (CandidateStatus.PRUNED, CandidateStatus.FAILED, CandidateStatus.OPTIMAL)
+    }
 
 
-def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | None = None,
-                 feasibility: FeasibilitySettings = FeasibilitySettings(),
-                 on_progress: Callable[[str, dict], None] | None = None) -> RunResult:
+def run_scenario(
+    scenario: Scenario,
+    out: str | Path | None = None,
+    jobs: int | None = None,
+    feasibility: FeasibilitySettings = FeasibilitySettings(),
+    on_progress: Callable[[str, dict], None] | None = None,
+) -> RunResult:
     """Enumerate, filter, optimise in lockstep with pruning, pick and export the winner.
 
     Parameters
@@ -106,8 +111,9 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
 
         survivors = sorted(summary.survivors, key=lambda v: (v.time_bound, v.composition.name))
         specs = list(candidate_specs(survivors))
-        manager = PruningManager(make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs),
-                                 scenario.pruning)
+        manager = PruningManager(
+            make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs), scenario.pruning
+        )
         recorder.update(counts={"optimized": len(survivors), "candidates": len(specs)})
         optimization_start = time.perf_counter()
         rounds = 0
@@ -116,8 +122,12 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
 
         def record(every: float = 0.0) -> list[CandidateResult]:
             results = [_labelled(r, by_name[r.name]) for r in manager.results.values()]
-            recorder.update(counts=_status_counts(results), results=results, every=every,
-                            seconds={"optimization": time.perf_counter() - optimization_start})
+            recorder.update(
+                counts=_status_counts(results),
+                results=results,
+                every=every,
+                seconds={"optimization": time.perf_counter() - optimization_start},
+            )
             return results
 
         try:
@@ -137,8 +147,12 @@ def run_scenario(scenario: Scenario, out: str | Path | None = None, jobs: int | 
         return RunResult(tuple(results), winner, summary, rounds, dict(recorder.seconds))
 
 
-def optimize_composition(scenario: Scenario, name: str, out: str | Path | None = None,
-                         on_iterate: Callable[[str, Iterate], None] | None = None) -> RunResult:
+def optimize_composition(
+    scenario: Scenario,
+    name: str,
+    out: str | Path | None = None,
+    on_iterate: Callable[[str, Iterate], None] | None = None,
+) -> RunResult:
     """Step C for one composition, in this process: a verified minimum-cost trajectory and its
     results folder (``result.json`` has the best candidate as the winner).
 
@@ -155,8 +169,7 @@ def optimize_composition(scenario: Scenario, name: str, out: str | Path | None =
     """
     base, _, only = name.partition("+")
     if only and only not in tuple(BoundaryPair):
-        raise CompositionError(f"{name!r}: the suffix after '+' must be one of "
-                               f"{', '.join(tuple(BoundaryPair))}")
+        raise CompositionError(f"{name!r}: the suffix after '+' must be one of {', '.join(tuple(BoundaryPair))}")
     chain = Composition.from_name(base, scenario.catalog)
     start = time.perf_counter()
     verdict = check_composition(chain, scenario.catalog, scenario.task)
@@ -166,13 +179,17 @@ def optimize_composition(scenario: Scenario, name: str, out: str | Path | None =
         raise InfeasibleError(f"{chain.name} cannot do the task: {verdict.message}")
     specs = [s for s in candidate_specs([verdict]) if not only or s.boundary_pair == only]
     if not specs:
-        raise CompositionError(f"{chain.name} has no clear boundary pair: the straight line of its fastest pair "
-                               "already clears the obstacles, or no pair's line does")
+        raise CompositionError(
+            f"{chain.name} has no clear boundary pair: the straight line of its fastest pair "
+            "already clears the obstacles, or no pair's line does"
+        )
     notify = on_iterate or (lambda candidate, iterate: None)
     candidates = [make_candidate(scenario, spec) for spec in specs]
     with RunRecorder(out, scenario, rule="single composition") as recorder:
-        recorder.update(counts={"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates),
-                                "pruned": 0}, seconds={"feasibility": time.perf_counter() - start})
+        recorder.update(
+            counts={"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates), "pruned": 0},
+            seconds={"feasibility": time.perf_counter() - start},
+        )
 
         def record() -> list[CandidateResult]:
             results = [c.result for c in candidates if c.result is not None]
@@ -191,8 +208,11 @@ def optimize_composition(scenario: Scenario, name: str, out: str | Path | None =
             done = _winner(record())
             if done is not None:
                 recorder.record_winner(done)
-            recorder.finish("interrupted", "interrupted by the user" + (
-                f"; {done.name} had already verified and is written as the winner so far" if done else ""))
+            recorder.finish(
+                "interrupted",
+                "interrupted by the user"
+                + (f"; {done.name} had already verified and is written as the winner so far" if done else ""),
+            )
             raise
         finally:
             for candidate in candidates:
@@ -217,8 +237,15 @@ def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
 
 
 def _progress_figures(progress: Progress, total: int) -> dict:
-    return {"round": progress.round, "alive": progress.alive, "total": total, "best_cost": progress.best_cost,
-            "best_optimal": progress.best_optimal, "pruned": progress.pruned, "finished": progress.finished}
+    return {
+        "round": progress.round,
+        "alive": progress.alive,
+        "total": total,
+        "best_cost": progress.best_cost,
+        "best_optimal": progress.best_optimal,
+        "pruned": progress.pruned,
+        "finished": progress.finished,
+    }
 
 
 def with_pruning(scenario: Scenario, rule: str | None = None, threshold: float | None = None) -> Scenario:

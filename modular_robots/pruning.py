@@ -80,8 +80,12 @@ logger = logging.getLogger(__name__)
 GUARD_VIOLATION = 1e-3
 
 
-def reference_cost(costs: Mapping[str, float], violations: Mapping[str, float],
-                   converged: Mapping[str, float], guard_violation: float = GUARD_VIOLATION) -> float | None:
+def reference_cost(
+    costs: Mapping[str, float],
+    violations: Mapping[str, float],
+    converged: Mapping[str, float],
+    guard_violation: float = GUARD_VIOLATION,
+) -> float | None:
     """The guarded reference: the smallest converged cost or cost of a live iterate whose
     violation is ``<= guard_violation``; None when nothing is trusted yet."""
     trusted = [c for k, c in costs.items() if violations[k] <= guard_violation]
@@ -111,8 +115,9 @@ class RoundCosts:
     floors: Mapping[str, float] = field(default_factory=dict)
 
 
-def ratio_rule(view: RoundCosts, settings: PruningSettings = PruningSettings(),
-               guard_violation: float = GUARD_VIOLATION) -> set[str]:
+def ratio_rule(
+    view: RoundCosts, settings: PruningSettings = PruningSettings(), guard_violation: float = GUARD_VIOLATION
+) -> set[str]:
     """Names of the candidates to prune after a round: those whose own iterate is trusted and
     whose cost exceeds the guarded reference by more than ``settings.threshold`` (relative), from
     ``settings.start_iteration`` on.
@@ -142,8 +147,9 @@ def ratio_rule(view: RoundCosts, settings: PruningSettings = PruningSettings(),
             continue
         if not above(c):
             continue
-        if view.earlier is not None and (k not in view.earlier
-                                         or not above(c - settings.lookahead * (view.earlier[k] - c))):
+        if view.earlier is not None and (
+            k not in view.earlier or not above(c - settings.lookahead * (view.earlier[k] - c))
+        ):
             continue
         chosen.add(k)
     chosen |= {k for k, b in view.floors.items() if above(b)}
@@ -211,17 +217,26 @@ class PruningManager:
                     for name, result in self._stop(pruned).items():
                         self.results[name] = result.pruned(round_)
                     alive = [n for n in alive if n not in pruned]
-                best = reference_cost({n: self.last[n].cost for n in alive if n in self.last},
-                                      {n: self.last[n].constraint_violation for n in alive if n in self.last},
-                                      converged, self.guard_violation)
-                yield Progress(round_, len(alive), best, tuple(sorted(pruned)), tuple(finished),
-                               min(converged.values()) if converged else None)
+                best = reference_cost(
+                    {n: self.last[n].cost for n in alive if n in self.last},
+                    {n: self.last[n].constraint_violation for n in alive if n in self.last},
+                    converged,
+                    self.guard_violation,
+                )
+                yield Progress(
+                    round_,
+                    len(alive),
+                    best,
+                    tuple(sorted(pruned)),
+                    tuple(finished),
+                    min(converged.values()) if converged else None,
+                )
         finally:
             try:
                 if alive:
                     for name, result in self._stop(alive).items():
                         self.results.setdefault(name, result)
-            except Exception:  # noqa: BLE001 - a dead worker must not hide the original error
+            except Exception:
                 logger.debug("stopping the live candidates failed", exc_info=True)
             finally:
                 self.executor.shutdown()
@@ -233,8 +248,10 @@ class PruningManager:
         return list(self.results.values())
 
     def _stop(self, names: list[str]) -> dict[str, CandidateResult]:
-        return {name: result if result is not None else CandidateResult.never_started(name)
-                for name, result in self.executor.stop(names).items()}
+        return {
+            name: result if result is not None else CandidateResult.never_started(name)
+            for name, result in self.executor.stop(names).items()
+        }
 
     def _prune(self, alive: list[str], converged: dict[str, float], round_: int) -> list[str]:
         if self.settings.rule == "none":
@@ -243,16 +260,28 @@ class PruningManager:
         # verification; its cost jumps while the new sub-step constraints are restored (measured:
         # 2.13 s -> 11.5 s -> 2.14 s), so it is judged on that optimum and is no reference.
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
-        floors = {n: max(self.last[n].cost_bound, self.floor.get(n, 0.0) if self.last[n].refinement > 0 else 0.0)
-                  for n in alive if n in self.last}
+        floors = {
+            n: max(self.last[n].cost_bound, self.floor.get(n, 0.0) if self.last[n].refinement > 0 else 0.0)
+            for n in alive
+            if n in self.last
+        }
         s = self.settings
         earlier = None
         if s.window:
-            earlier = {n: self.trusted[n][0] for n in live
-                       if len(self.trusted[n]) == s.window + 1 and self.trusted[n][0] is not None}
-        view = RoundCosts(round_, {n: self.last[n].cost for n in live},
-                          {n: self.last[n].constraint_violation for n in live}, converged, earlier,
-                          self.untrusted_for, floors)
+            earlier = {
+                n: self.trusted[n][0]
+                for n in live
+                if len(self.trusted[n]) == s.window + 1 and self.trusted[n][0] is not None
+            }
+        view = RoundCosts(
+            round_,
+            {n: self.last[n].cost for n in live},
+            {n: self.last[n].constraint_violation for n in live},
+            converged,
+            earlier,
+            self.untrusted_for,
+            floors,
+        )
         chosen = ratio_rule(view, s, self.guard_violation)
         return [n for n in alive if n in chosen]
 
@@ -262,6 +291,5 @@ class PruningManager:
             self.floor[name] = previous.cost
         self.last[name] = iterate
         ok = iterate.constraint_violation <= self.guard_violation
-        self.trusted.setdefault(name, deque(maxlen=self.settings.window + 1)).append(
-            iterate.cost if ok else None)
+        self.trusted.setdefault(name, deque(maxlen=self.settings.window + 1)).append(iterate.cost if ok else None)
         self.untrusted_for[name] = 0 if ok else self.untrusted_for.get(name, 0) + 1

@@ -47,8 +47,13 @@ class RunRecorder:
         if self.path is not None:
             self.path.mkdir(parents=True, exist_ok=True)
         self.scenario = scenario
-        self.settings = {"optimizer": asdict(scenario.optimizer), "pruning": asdict(scenario.pruning),
-                         "cost": scenario.task.cost, "payload": scenario.task.payload, **settings}
+        self.settings = {
+            "optimizer": asdict(scenario.optimizer),
+            "pruning": asdict(scenario.pruning),
+            "cost": scenario.task.cost,
+            "payload": scenario.task.payload,
+            **settings,
+        }
         self.status, self.message = "running", ""
         self.counts: dict = {}
         self.seconds: dict[str, float] = {}
@@ -70,8 +75,14 @@ class RunRecorder:
                 self.finish("failed", f"stopped by an error: {exc}")
         return False
 
-    def update(self, *, counts: dict | None = None, seconds: dict | None = None,
-               results: Sequence[CandidateResult] | None = None, every: float = 0.0) -> None:
+    def update(
+        self,
+        *,
+        counts: dict | None = None,
+        seconds: dict | None = None,
+        results: Sequence[CandidateResult] | None = None,
+        every: float = 0.0,
+    ) -> None:
         """Merge stage ``counts`` and ``seconds``, replace the candidate ``results``, and rewrite the
         document unless it was written less than ``every`` seconds ago."""
         self.counts.update(counts or {})
@@ -116,8 +127,10 @@ class RunRecorder:
             "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
             "candidates": [r.to_json() for r in self.results],
             "winner": self.winner,
-            "totals": {"optimizer_iterations": int(sum(r.iterations for r in self.results)),
-                       "wall_seconds": round(time.perf_counter() - self._start, 3)},
+            "totals": {
+                "optimizer_iterations": int(sum(r.iterations for r in self.results)),
+                "wall_seconds": round(time.perf_counter() - self._start, 3),
+            },
         }
 
     def _write(self) -> None:
@@ -127,7 +140,16 @@ class RunRecorder:
 
 
 def _winner_json(result: CandidateResult, files: dict) -> dict:
-    return {"composition": result.composition or result.name, "candidate": result.name,
-            "boundary_pair": str(result.boundary_pair), "dof": result.dof, "cost": result.cost, "tf": result.tf,
-            "iterations": result.iterations, "seconds": round(result.seconds, 4), "substeps": result.substeps,
-            "verification": result.verification.to_json() if result.verification else None, "files": files}
+    return {
+        "composition": result.composition or result.name,
+        "candidate": result.name,
+        "boundary_pair": str(result.boundary_pair),
+        "dof": result.dof,
+        "cost": result.cost,
+        "tf": result.tf,
+        "iterations": result.iterations,
+        "seconds": round(result.seconds, 4),
+        "substeps": result.substeps,
+        "verification": result.verification.to_json() if result.verification else None,
+        "files": files,
+    }

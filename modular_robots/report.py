@@ -17,8 +17,17 @@ import numpy as np
 from .ocp.candidate import CandidateResult, CandidateStatus
 from .ocp.verification import Trajectory
 
-__all__ = ["atomic_write", "plot_joints", "plot_pruning_history", "write_pruning_plot", "write_winner_files",
-           "URDF", "TRAJECTORY", "JOINTS_PLOT", "PRUNING_PLOT"]
+__all__ = [
+    "atomic_write",
+    "plot_joints",
+    "plot_pruning_history",
+    "write_pruning_plot",
+    "write_winner_files",
+    "URDF",
+    "TRAJECTORY",
+    "JOINTS_PLOT",
+    "PRUNING_PLOT",
+]
 
 URDF = "winner.urdf"
 TRAJECTORY = "trajectory.csv"
@@ -76,13 +85,15 @@ def plot_joints(trajectory: Trajectory, path: Path, title: str = "") -> None:
     """The paper's Fig. 4: joint positions, velocities and torques over time, limits dashed."""
     fig = _figure(figsize=(8, 8))
     axes = fig.subplots(3, 1, sharex=True)
-    rows = ((trajectory.q, "position [rad | m]", None),
-            (trajectory.qd, "velocity [rad/s | m/s]", trajectory.velocity_limit),
-            (trajectory.tau, "torque [N m | N]", trajectory.effort_limit))
+    rows = (
+        (trajectory.q, "position [rad | m]", None),
+        (trajectory.qd, "velocity [rad/s | m/s]", trajectory.velocity_limit),
+        (trajectory.tau, "torque [N m | N]", trajectory.effort_limit),
+    )
     for ax, (values, label, limit) in zip(axes, rows):
         for i in range(values.shape[1]):
             drawstyle = "steps-post" if values is trajectory.tau else "default"
-            line, = ax.plot(trajectory.t, values[:, i], label=f"joint {i + 1}", drawstyle=drawstyle)
+            (line,) = ax.plot(trajectory.t, values[:, i], label=f"joint {i + 1}", drawstyle=drawstyle)
             if limit is not None and np.isfinite(limit[i]):
                 ax.axhline(limit[i], color=line.get_color(), ls="--", lw=0.6)
                 ax.axhline(-limit[i], color=line.get_color(), ls="--", lw=0.6)
@@ -95,8 +106,7 @@ def plot_joints(trajectory: Trajectory, path: Path, title: str = "") -> None:
     _save(fig, path)
 
 
-def plot_pruning_history(results: Sequence[CandidateResult], winner: str | None, path: Path,
-                         title: str = "") -> None:
+def plot_pruning_history(results: Sequence[CandidateResult], winner: str | None, path: Path, title: str = "") -> None:
     """Cost per candidate per iteration (log axis); pruned points marked, the winner highlighted."""
     fig = _figure(figsize=(9, 5.5))
     ax = fig.subplots()
@@ -114,8 +124,13 @@ def plot_pruning_history(results: Sequence[CandidateResult], winner: str | None,
             ax.plot(its[-1], cost[-1], "o", mfc="none", color="tab:orange", ms=5)
     for r in results:
         if r.name == winner and r.cost_history:
-            ax.plot(np.arange(1, len(r.cost_history) + 1), r.cost_history, color="tab:green", lw=2.2,
-                    label=f"winner {r.name}")
+            ax.plot(
+                np.arange(1, len(r.cost_history) + 1),
+                r.cost_history,
+                color="tab:green",
+                lw=2.2,
+                label=f"winner {r.name}",
+            )
     ax.plot([], [], "x", color="tab:red", label="pruned")
     ax.plot([], [], "o", mfc="none", color="tab:orange", label="failed")
     ax.set_yscale("log")

@@ -121,8 +121,7 @@ class RobotModel:
 
     def moving_primitives(self) -> tuple[int, ...]:
         """Indices of the primitives that move with some joint (the others never change pose)."""
-        return tuple(i for i, fid in enumerate(self._primitive_frames)
-                     if self.model.frames[fid].parentJoint != 0)
+        return tuple(i for i, fid in enumerate(self._primitive_frames) if self.model.frames[fid].parentJoint != 0)
 
     # -- kinematics -----------------------------------------------------------------------
     def tool_position(self, q: np.ndarray) -> np.ndarray:
@@ -133,12 +132,16 @@ class RobotModel:
     def tool_jacobian(self, q: np.ndarray) -> np.ndarray:
         """3 x nv Jacobian of :meth:`tool_position` (base-frame axes)."""
         return pin.computeFrameJacobian(
-            self.model, self.data, np.asarray(q, dtype=float), self.tool_frame_id,
+            self.model,
+            self.data,
+            np.asarray(q, dtype=float),
+            self.tool_frame_id,
             pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
         )[:3].copy()
 
-    def primitive_axes(self, q: np.ndarray | None, indices: Sequence[int] | None = None
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def primitive_axes(
+        self, q: np.ndarray | None, indices: Sequence[int] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Frame rotations ``(P, 3, 3)`` and axis end points ``a``, ``b`` ``(P, 3)`` in the base
         frame of the primitives ``indices`` (default all). ``q=None`` reuses the frame placements
         already computed in :attr:`data`."""

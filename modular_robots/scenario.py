@@ -124,8 +124,10 @@ def _read_task(f: Fields) -> Task:
         sphere.done()
         item.done()
         if math.dist(center, (0.0, 0.0, 0.0)) <= radius:
-            raise item.fail("sphere", f"the obstacle contains the robot's base at the origin "
-                                      f"(centre {list(center)}, radius {radius:g})")
+            raise item.fail(
+                "sphere",
+                f"the obstacle contains the robot's base at the origin (centre {list(center)}, radius {radius:g})",
+            )
         for label, point in (("start", start), ("goal", goal)):
             if math.dist(center, point) <= radius:
                 raise item.fail("sphere", f"the obstacle contains the {label} position {list(point)}")
@@ -133,8 +135,10 @@ def _read_task(f: Fields) -> Task:
     cost = f.string("cost", default="time", choices=COSTS)
     self_collision = f.boolean("self_collision", default=False)
     if self_collision:
-        raise f.fail("self_collision", "self-collision checking is not supported yet (it is off in the "
-                                       "paper); remove the key or set it to false")
+        raise f.fail(
+            "self_collision",
+            "self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false",
+        )
     f.done()
     return Task(payload, start, goal, tuple(obstacles), cost, self_collision)
 
@@ -148,8 +152,7 @@ def _read_optimizer(f: Fields | None) -> OptimizerSettings:
         substeps=f.integer("substeps", default=d.substeps, minimum=1),
         max_iterations=f.integer("max_iterations", default=d.max_iterations, minimum=1),
         tolerance=f.number("tolerance", default=d.tolerance, exclusive_minimum=0.0),
-        constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance,
-                                      exclusive_minimum=0.0),
+        constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance, exclusive_minimum=0.0),
         transcription=f.string("transcription", default=d.transcription, choices=TRANSCRIPTIONS),
         clearance_margin=f.number("clearance_margin", default=d.clearance_margin, minimum=0.0),
     )

@@ -50,16 +50,18 @@ def _inertial(module: Module) -> str:
     if module.mass == 0.0:
         return ""
     ixx, iyy, izz, ixy, ixz, iyz = (_num(v) for v in module.inertia)
-    return _fill("inertial", xyz=_vec(module.com), mass=_num(module.mass),
-                 ixx=ixx, iyy=iyy, izz=izz, ixy=ixy, ixz=ixz, iyz=iyz)
+    return _fill(
+        "inertial", xyz=_vec(module.com), mass=_num(module.mass), ixx=ixx, iyy=iyy, izz=izz, ixy=ixy, ixz=ixz, iyz=iyz
+    )
 
 
 def _collision(module: Module) -> str:
     if module.collision == "sphere":
         return _fill("sphere", xyz=_vec((0, 0, module.length)), radius=_num(module.radius))
     if module.collision == "capsule":
-        return _fill("capsule", xyz=_vec((0, 0, module.length / 2)), radius=_num(module.radius),
-                     length=_num(module.length))
+        return _fill(
+            "capsule", xyz=_vec((0, 0, module.length / 2)), radius=_num(module.radius), length=_num(module.length)
+        )
     return ""
 
 
@@ -67,8 +69,9 @@ def _limit(module: Module) -> str:
     if module.limits is None:
         return ""
     lim = module.limits
-    return _fill("limit", lower=_num(lim.lower), upper=_num(lim.upper),
-                 velocity=_num(lim.velocity), effort=_num(lim.effort))
+    return _fill(
+        "limit", lower=_num(lim.lower), upper=_num(lim.upper), velocity=_num(lim.velocity), effort=_num(lim.effort)
+    )
 
 
 def composition_urdf(composition: Composition, catalog: Catalog, payload: float = 0.0) -> str:
@@ -88,11 +91,19 @@ def composition_urdf(composition: Composition, catalog: Catalog, payload: float 
     parent: Module | None = None
     joint_index = 0
     for index, module in enumerate(modules):
-        common = dict(index=index, module=module.id, link=link_name(index, module),
-                      inertial=_inertial(module), collision=_collision(module))
+        common = dict(
+            index=index,
+            module=module.id,
+            link=link_name(index, module),
+            inertial=_inertial(module),
+            collision=_collision(module),
+        )
         if parent is not None:
-            common.update(parent=link_name(index - 1, parent), xyz=_vec((0, 0, parent.length)),
-                          rpy=_vec((parent.twist_out + module.twist_in, 0, 0)))
+            common.update(
+                parent=link_name(index - 1, parent),
+                xyz=_vec((0, 0, parent.length)),
+                rpy=_vec((parent.twist_out + module.twist_in, 0, 0)),
+            )
         if module.kind == "base":
             parts.append(_fill("base", **common))
         elif module.kind == "link":
@@ -102,9 +113,17 @@ def composition_urdf(composition: Composition, catalog: Catalog, payload: float 
                 joint_index += 1
             joint = f"joint_{joint_index}" if module.dof else f"{common['link']}_mount"
             kind = "effector" if module.kind == "effector" else "joint"
-            parts.append(_fill(kind, joint=joint, joint_type=module.joint, limit=_limit(module),
-                               tool_xyz=_vec((0, 0, module.length)),
-                               tool_rpy=_vec((module.twist_out, 0, 0)), **common))
+            parts.append(
+                _fill(
+                    kind,
+                    joint=joint,
+                    joint_type=module.joint,
+                    limit=_limit(module),
+                    tool_xyz=_vec((0, 0, module.length)),
+                    tool_rpy=_vec((module.twist_out, 0, 0)),
+                    **common,
+                )
+            )
         parent = module
     parts.append(_payload(payload))
     return _fill("robot", name=composition.name, catalog=catalog.name, body="".join(parts))
@@ -114,11 +133,19 @@ def _payload(mass: float) -> str:
     inertial = ""
     if mass > 0.0:
         moment = 0.4 * mass * PAYLOAD_RADIUS**2
-        inertial = _fill("inertial", xyz="0 0 0", mass=_num(mass), ixx=_num(moment), iyy=_num(moment),
-                         izz=_num(moment), ixy="0", ixz="0", iyz="0")
+        inertial = _fill(
+            "inertial",
+            xyz="0 0 0",
+            mass=_num(mass),
+            ixx=_num(moment),
+            iyy=_num(moment),
+            izz=_num(moment),
+            ixy="0",
+            ixz="0",
+            iyz="0",
+        )
     collision = _fill("sphere", xyz="0 0 0", radius=_num(PAYLOAD_RADIUS))
-    return _fill("payload", mass=_num(mass), radius=_num(PAYLOAD_RADIUS), inertial=inertial,
-                 collision=collision)
+    return _fill("payload", mass=_num(mass), radius=_num(PAYLOAD_RADIUS), inertial=inertial, collision=collision)
 
 
 def write_urdf(path: str | Path, composition: Composition, catalog: Catalog, payload: float = 0.0) -> Path:

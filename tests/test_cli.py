@@ -20,7 +20,14 @@ SMALL_SCENARIO = ROOT / "tests" / "data" / "small.yaml"
 def test_enumerate_count():
     result = CliRunner().invoke(main, ["enumerate", str(PAPER_SCENARIO), "--count"])
     assert result.exit_code == 0, result.output
-    assert result.output.splitlines() == ["dof  compositions", "2    12", "3    72", "4    432", "5    2592", "all  3108"]
+    assert result.output.splitlines() == [
+        "dof  compositions",
+        "2    12",
+        "3    72",
+        "4    432",
+        "5    2592",
+        "all  3108",
+    ]
 
 
 def test_enumerate_lists_names_of_one_dof():
@@ -42,7 +49,9 @@ def test_urdf_writes_a_loadable_file(tmp_path):
 
 
 def test_errors_are_one_line_without_traceback(tmp_path):
-    result = CliRunner().invoke(main, ["urdf", "B-J1-E1", "--scenario", str(PAPER_SCENARIO), "-o", str(tmp_path / "x.urdf")])
+    result = CliRunner().invoke(
+        main, ["urdf", "B-J1-E1", "--scenario", str(PAPER_SCENARIO), "-o", str(tmp_path / "x.urdf")]
+    )
     assert result.exit_code == 1
     assert result.output == (
         "Error: composition 'B-J1-E1': 0 link(s) after a joint; the grammar allows 1 to 1 (catalogue 'paper')\n"
@@ -68,7 +77,7 @@ def test_optimize_writes_a_motion_from_start_to_goal(tmp_path):
         rows = list(csv.DictReader(f))
     nv = Composition.from_name(name, scenario.catalog).dof
     assert pin.buildModelFromUrdf(str(out / "winner.urdf")).nv == nv == doc["winner"]["dof"]
-    assert list(rows[0])[:nv + 1] == ["t"] + [f"q{i}" for i in range(1, nv + 1)]
+    assert list(rows[0])[: nv + 1] == ["t"] + [f"q{i}" for i in range(1, nv + 1)]
     first, last = rows[0], rows[-1]
     for row, target in ((first, scenario.task.start), (last, scenario.task.goal)):
         assert np.linalg.norm([float(row[k]) - t for k, t in zip("xyz", target)]) < 0.01

@@ -37,7 +37,9 @@ def _variant(tmp_path):
     text = text.replace("dof: [2, 5]", "dof: [1, 3]")
     text = text.replace("links_after_base: [0, 0]", "links_after_base: [0, 1]")
     text = text.replace("links_after_joint: [1, 1]", "links_after_joint: [0, 2]")
-    text = text.replace("  - id: L3\n", "  - id: B2\n    kind: base\n    diameter: 0.3\n    length: 0.1\n\n  - id: L3\n")
+    text = text.replace(
+        "  - id: L3\n", "  - id: B2\n    kind: base\n    diameter: 0.3\n    length: 0.1\n\n  - id: L3\n"
+    )
     text = text.replace(
         "  - id: E2\n    kind: effector\n    joint: prismatic",
         "  - id: E2\n    kind: effector\n    joint: fixed",
@@ -83,13 +85,28 @@ def test_other_grammar_against_regex_brute_force(tmp_path):
     ("name", "message"),
     [
         ("B-J1-E1", "composition 'B-J1-E1': 0 link(s) after a joint; the grammar allows 1 to 1 (catalogue 'paper')"),
-        ("B-J1-L1-L2-E1", "composition 'B-J1-L1-L2-E1': 2 link(s) after a joint; the grammar allows 1 to 1 (catalogue 'paper')"),
-        ("B-L1-J1-L1-E1", "composition 'B-L1-J1-L1-E1': 1 link(s) after a base; the grammar allows 0 to 0 (catalogue 'paper')"),
+        (
+            "B-J1-L1-L2-E1",
+            "composition 'B-J1-L1-L2-E1': 2 link(s) after a joint; the grammar allows 1 to 1 (catalogue 'paper')",
+        ),
+        (
+            "B-L1-J1-L1-E1",
+            "composition 'B-L1-J1-L1-E1': 1 link(s) after a base; the grammar allows 0 to 0 (catalogue 'paper')",
+        ),
         ("J1-L1-E1", "composition 'J1-L1-E1': must start with a base module, not J1 (joint) (catalogue 'paper')"),
         ("B-J1-L1", "composition 'B-J1-L1': must end with an effector module, not L1 (link) (catalogue 'paper')"),
-        ("B-J1-L1-E1-J1-L1-E1", "composition 'B-J1-L1-E1-J1-L1-E1': position 4: E1 (effector) may only be first or last (catalogue 'paper')"),
-        ("B-J1-L1-J1-L1-J1-L1-J1-L1-J1-L1-E1", "composition 'B-J1-L1-J1-L1-J1-L1-J1-L1-J1-L1-E1': has 6 DOF; the grammar allows 2 to 5 (catalogue 'paper')"),
-        ("B-J7-L1-E1", "composition 'B-J7-L1-E1', position 2: unknown module 'J7' in catalogue 'paper' (known: B, J1, J2, L1, L2, L3, E1, E2)"),
+        (
+            "B-J1-L1-E1-J1-L1-E1",
+            "composition 'B-J1-L1-E1-J1-L1-E1': position 4: E1 (effector) may only be first or last (catalogue 'paper')",
+        ),
+        (
+            "B-J1-L1-J1-L1-J1-L1-J1-L1-J1-L1-E1",
+            "composition 'B-J1-L1-J1-L1-J1-L1-J1-L1-J1-L1-E1': has 6 DOF; the grammar allows 2 to 5 (catalogue 'paper')",
+        ),
+        (
+            "B-J7-L1-E1",
+            "composition 'B-J7-L1-E1', position 2: unknown module 'J7' in catalogue 'paper' (known: B, J1, J2, L1, L2, L3, E1, E2)",
+        ),
         ("B--E1", "composition 'B--E1': expected module ids joined by '-', e.g. B-J1-L2-E1"),
     ],
 )

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from modular_robots import CollisionModel, Composition, SphereObstacle, Task, enumerate_compositions, load_scenario, robot_model
+from modular_robots import (
+    CollisionModel,
+    Composition,
+    SphereObstacle,
+    Task,
+    enumerate_compositions,
+    load_scenario,
+    robot_model,
+)
 from modular_robots.cli import main
 from modular_robots.execution import ProcessEngine, SerialEngine
 from modular_robots.feasibility import TESTS, FeasibilitySummary, check_composition, filter_compositions, max_reach
@@ -138,11 +146,15 @@ def test_payload_just_under_and_just_over_the_limit(paper_catalog):
     assert under.passed, under.message
     lever = 0.375 * 0.05 + 0.75 * 0.5
     # IK holds the target to 1e-4 m, which moves sin(q2) by up to ~6e-5 relative
-    assert under.figures["torque_ratio"] == pytest.approx((lever + 0.95 * 0.99 * threshold) / (lever + 0.95 * threshold), rel=2e-4)
+    assert under.figures["torque_ratio"] == pytest.approx(
+        (lever + 0.95 * 0.99 * threshold) / (lever + 0.95 * threshold), rel=2e-4
+    )
     over = _check(paper_catalog, "B-J1-L1-J1-L1-E1", _task(target, payload=threshold * 1.01))
     assert over.failed_test == "static torque"
     assert over.message.startswith("static torque 10") and over.message.endswith(" N m > 100 N m (joint 2, start)")
-    assert over.figures["torque_ratio"] == pytest.approx((lever + 0.95 * 1.01 * threshold) / (lever + 0.95 * threshold), rel=2e-4)
+    assert over.figures["torque_ratio"] == pytest.approx(
+        (lever + 0.95 * 1.01 * threshold) / (lever + 0.95 * threshold), rel=2e-4
+    )
 
 
 def test_no_feasible_composition_gives_a_diagnosis(paper_catalog):
@@ -183,7 +195,8 @@ def test_filter_cli_on_a_small_catalogue(tmp_path):
     assert rows["reach"][:2] == ["84", "0"] and rows["collision"][:2] == ["0", "0"]
     assert "0 of 84 compositions are feasible" in result.output
     assert result.output.rstrip().endswith(
-        "Error: no composition is feasible: the last 84 candidate(s) were removed by the reach test")
+        "Error: no composition is feasible: the last 84 candidate(s) were removed by the reach test"
+    )
     assert out.exists()
 
 

@@ -10,6 +10,8 @@ come back up, which is the guess :func:`~modular_robots.ocp.guess.swing_path` gi
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -17,10 +19,10 @@ from scipy.integrate import solve_ivp
 
 from modular_robots.ocp.candidate import Candidate
 from modular_robots.ocp.guess import swing_path
+from modular_robots.ocp.shooting import ShootingProblem
 from modular_robots.report import write_winner_files
 from modular_robots.robot import RobotModel
 from modular_robots.scenario import OptimizerSettings
-from modular_robots.ocp.shooting import ShootingProblem
 
 G0, MASS, ARM, I_OWN = 9.81, 1.0, 1.0, 1e-4
 Q_START, Q_GOAL, HOLD_SHARE = -1.2, 0.45, 0.999
@@ -31,8 +33,16 @@ def pendulum(tau_max: float = TAU_MAX, joint=pin.JointModelRY) -> RobotModel:
     """Point mass ``MASS`` at ``ARM`` along the link's x; about y, positive angles lower it."""
     model = pin.Model()
     model.name = "pendulum"
-    j = model.addJoint(0, joint(), pin.SE3.Identity(), "joint1", np.array([tau_max]), np.array([3.0]),
-                       np.array([-3.0]), np.array([3.0]))
+    j = model.addJoint(
+        0,
+        joint(),
+        pin.SE3.Identity(),
+        "joint1",
+        np.array([tau_max]),
+        np.array([3.0]),
+        np.array([-3.0]),
+        np.array([3.0]),
+    )
     model.appendBodyToJoint(j, pin.Inertia(MASS, np.array([ARM, 0.0, 0.0]), I_OWN * np.eye(3)), pin.SE3.Identity())
     model.addFrame(pin.Frame("tool0", j, 0, pin.SE3(np.eye(3), np.array([ARM, 0.0, 0.0])), pin.FrameType.OP_FRAME))
     return RobotModel(model, "tool0", name="pendulum")
@@ -108,9 +118,11 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
     assert result.trajectory.q[:, 0].max() > Q_GOAL + 0.05
     inertia = MASS * ARM**2 + I_OWN
     if transcription == "forward":
+
         def torque(t, q, v):
             return controls[min(int(t / tf * intervals), intervals - 1), 0]
     else:  # u is the acceleration; the hand-written inverse dynamics give the torque
+
         def torque(t, q, v):
             qdd = controls[min(int(t / tf * intervals), intervals - 1), 0]
             return inertia * qdd - MASS * G0 * ARM * np.cos(q)
@@ -120,7 +132,7 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
 
     grid = np.linspace(0.0, tf, intervals + 1)
     x, qs, taus = np.array([Q_START, 0.0]), [], []
-    for a, b in zip(grid[:-1], grid[1:]):
+    for a, b in itertools.pairwise(grid):
         piece = solve_ivp(rhs, (a, b), x, rtol=1e-10, atol=1e-10, dense_output=True)
         ts = np.linspace(a, b, 50, endpoint=False) + 1e-12
         qs.extend(piece.sol(ts)[0])
@@ -149,5 +161,5 @@ def test_a_candidate_closed_during_its_swing_solve_records_the_swing_problem(tmp
     assert swung.unpack(result.y)[0] == pytest.approx(result.tf, rel=1e-12)
     assert problem.unpack(result.y)[0] != pytest.approx(result.tf, rel=1e-3)
     assert result.trajectory is None
-    with pytest.raises(ValueError, match="^pendulum: a stopped result has no trajectory to write$"):
+    with pytest.raises(ValueError, match=r"^pendulum: a stopped result has no trajectory to write$"):
         write_winner_files(tmp_path, result)

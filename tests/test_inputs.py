@@ -27,26 +27,56 @@ def _line(text: str, needle: str) -> int:
 @pytest.mark.parametrize(
     ("old", "new", "key", "message"),
     [
-        ("id: J2\n", "id: J9\n    colour: red\n", "modules[2].colour",
-         "unknown key (expected one of: armature, collision, com, diameter, id, inertia, joint, kind, length, limits, mass, twist_in_deg, twist_out_deg)"),
+        (
+            "id: J2\n",
+            "id: J9\n    colour: red\n",
+            "modules[2].colour",
+            "unknown key (expected one of: armature, collision, com, diameter, id, inertia, joint, kind, length, limits, mass, twist_in_deg, twist_out_deg)",
+        ),
         ("    mass: 0.9\n", "    mass: -1\n", "modules[2].mass", "expected a number > 0, got -1"),
         ("    mass: 0.9\n", "    mass: heavy\n", "modules[2].mass", "expected a number, got the string 'heavy'"),
         ("    mass: 0.9\n", "", "modules[2].mass", "missing required key"),
-        ("kind: joint\n    joint: prismatic", "kind: joint\n    joint: screw", "modules[2].joint",
-         "expected one of revolute, prismatic; got 'screw'"),
-        ("velocity: 5.0, effort: 90.0", "velocity: 5.0, effort: -90.0", "modules[2].limits.effort",
-         "expected a number > 0, got -90"),
-        ("position: [0.0, 0.2]", "position: [0.2, 0.0]", "modules[2].limits.position",
-         "expected [low, high] with low <= high, got [0.2, 0]"),
+        (
+            "kind: joint\n    joint: prismatic",
+            "kind: joint\n    joint: screw",
+            "modules[2].joint",
+            "expected one of revolute, prismatic; got 'screw'",
+        ),
+        (
+            "velocity: 5.0, effort: 90.0",
+            "velocity: 5.0, effort: -90.0",
+            "modules[2].limits.effort",
+            "expected a number > 0, got -90",
+        ),
+        (
+            "position: [0.0, 0.2]",
+            "position: [0.2, 0.0]",
+            "modules[2].limits.position",
+            "expected [low, high] with low <= high, got [0.2, 0]",
+        ),
         ("com: [0.0, 0.0, 0.1]", "com: [0.0, 0.1]", "modules[2].com", "expected a list of 3 numbers, got a list"),
         ("dof: [2, 5]", "dof: [2, five]", "grammar.dof", "item 1: expected a number, got the string 'five'"),
         ("id: L2\n", "id: L1\n", "modules[4].id", "duplicate module id 'L1' (first at modules[3])"),
-        ("inertia: [2.0e-3, 2.0e-3, 0.65e-3]\n    limits: {position: [0.0, 0.2]",
-         "inertia: [2.0e-3, 2.0e-3, 5.0e-3]\n    limits: {position: [0.0, 0.2]", "modules[2].inertia",
-         "expected positive principal moments that satisfy the triangle inequality, got [0.002, 0.002, 0.005]"),
+        (
+            "inertia: [2.0e-3, 2.0e-3, 0.65e-3]\n    limits: {position: [0.0, 0.2]",
+            "inertia: [2.0e-3, 2.0e-3, 5.0e-3]\n    limits: {position: [0.0, 0.2]",
+            "modules[2].inertia",
+            "expected positive principal moments that satisfy the triangle inequality, got [0.002, 0.002, 0.005]",
+        ),
     ],
-    ids=["unknown-key", "negative-mass", "wrong-type", "missing-key", "bad-choice", "negative-effort",
-         "reversed-limits", "short-vector", "bad-grammar", "duplicate-id", "unphysical-inertia"],
+    ids=[
+        "unknown-key",
+        "negative-mass",
+        "wrong-type",
+        "missing-key",
+        "bad-choice",
+        "negative-effort",
+        "reversed-limits",
+        "short-vector",
+        "bad-grammar",
+        "duplicate-id",
+        "unphysical-inertia",
+    ],
 )
 def test_catalog_errors_name_file_line_key(tmp_path, old, new, key, message):
     path = _catalog(tmp_path, old, new)
@@ -56,7 +86,7 @@ def test_catalog_errors_name_file_line_key(tmp_path, old, new, key, message):
     leaf = key.rsplit(".", 1)[-1].split("[")[0]
     assert str(info.value).startswith(f"{path}:")
     assert str(info.value).endswith(f": {key}: {message}")
-    line = int(str(info.value)[len(str(path)) + 1:].split(":")[0])
+    line = int(str(info.value)[len(str(path)) + 1 :].split(":")[0])
     named = text.splitlines()[line - 1]
     assert ("- id:" in named) if message == "missing required key" else (f"{leaf}:" in named), named
 
@@ -113,30 +143,87 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
 @pytest.mark.parametrize(
     ("old", "new", "needle", "message"),
     [
-        ("start: [1.5, 1.5, 2.0]", "start: [.nan, 1.5, 2.0]", "start:", "task.start: item 0: expected a finite number, got nan"),
-        ("goal: [-2.0, -1.2, 0.6]", "goal: [-2.0, -1.2]", "goal:", "task.goal: expected a list of 3 numbers, got a list"),
+        (
+            "start: [1.5, 1.5, 2.0]",
+            "start: [.nan, 1.5, 2.0]",
+            "start:",
+            "task.start: item 0: expected a finite number, got nan",
+        ),
+        (
+            "goal: [-2.0, -1.2, 0.6]",
+            "goal: [-2.0, -1.2]",
+            "goal:",
+            "task.goal: expected a list of 3 numbers, got a list",
+        ),
         ("payload: 50.0", "payload: -5", "payload:", "task.payload: expected a number >= 0, got -5"),
         ("cost: time", "cost: energy", "cost:", "task.cost: expected one of time, effort; got 'energy'"),
-        ("  cost: time", "  cost: time\n  speed: 3", "speed:",
-         "task.speed: unknown key (expected one of: cost, goal, obstacles, payload, self_collision, start)"),
-        ("  cost: time", "  cost: time\n  self_collision: true", "self_collision:",
-         "task.self_collision: self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false"),
+        (
+            "  cost: time",
+            "  cost: time\n  speed: 3",
+            "speed:",
+            "task.speed: unknown key (expected one of: cost, goal, obstacles, payload, self_collision, start)",
+        ),
+        (
+            "  cost: time",
+            "  cost: time\n  self_collision: true",
+            "self_collision:",
+            "task.self_collision: self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false",
+        ),
         ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 3, got 1"),
-        ("threshold: 0.5", "threshold: half", "threshold:", "pruning.threshold: expected a number, got the string 'half'"),
+        (
+            "threshold: 0.5",
+            "threshold: half",
+            "threshold:",
+            "pruning.threshold: expected a number, got the string 'half'",
+        ),
         ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, none; got 'greedy'"),
-        ("threshold: 0.5", "threshold: 0.5\n  patience: -1", "patience:",
-         "pruning.patience: expected an integer >= 0, got -1"),
-        ("threshold: 0.5", "threshold: 0.5\n  lookahead: soon", "lookahead:",
-         "pruning.lookahead: expected a number, got the string 'soon'"),
-        ("center: [1.5, -1.3, 1.1], radius: 0.30", "center: [0.1, 0.0, 0.0], radius: 0.30", "- sphere:",
-         "task.obstacles[0].sphere: the obstacle contains the robot's base at the origin (centre [0.1, 0.0, 0.0], radius 0.3)"),
-        ("center: [1.5, -1.3, 1.1], radius: 0.30", "center: [1.5, 1.5, 1.9], radius: 0.30", "- sphere:",
-         "task.obstacles[0].sphere: the obstacle contains the start position [1.5, 1.5, 2.0]"),
-        ("catalog: catalogs/paper.yaml", "catalog: catalogs/missing.yaml", "catalog:",
-         "catalog: no catalogue file at {dir}/catalogs/missing.yaml"),
+        (
+            "threshold: 0.5",
+            "threshold: 0.5\n  patience: -1",
+            "patience:",
+            "pruning.patience: expected an integer >= 0, got -1",
+        ),
+        (
+            "threshold: 0.5",
+            "threshold: 0.5\n  lookahead: soon",
+            "lookahead:",
+            "pruning.lookahead: expected a number, got the string 'soon'",
+        ),
+        (
+            "center: [1.5, -1.3, 1.1], radius: 0.30",
+            "center: [0.1, 0.0, 0.0], radius: 0.30",
+            "- sphere:",
+            "task.obstacles[0].sphere: the obstacle contains the robot's base at the origin (centre [0.1, 0.0, 0.0], radius 0.3)",
+        ),
+        (
+            "center: [1.5, -1.3, 1.1], radius: 0.30",
+            "center: [1.5, 1.5, 1.9], radius: 0.30",
+            "- sphere:",
+            "task.obstacles[0].sphere: the obstacle contains the start position [1.5, 1.5, 2.0]",
+        ),
+        (
+            "catalog: catalogs/paper.yaml",
+            "catalog: catalogs/missing.yaml",
+            "catalog:",
+            "catalog: no catalogue file at {dir}/catalogs/missing.yaml",
+        ),
     ],
-    ids=["nan-target", "short-goal", "negative-payload", "unknown-cost", "unknown-key", "self-collision", "too-few-nodes",
-         "threshold-type", "unknown-rule", "negative-patience", "lookahead-type", "obstacle-contains-base", "obstacle-contains-start", "missing-catalog"],
+    ids=[
+        "nan-target",
+        "short-goal",
+        "negative-payload",
+        "unknown-cost",
+        "unknown-key",
+        "self-collision",
+        "too-few-nodes",
+        "threshold-type",
+        "unknown-rule",
+        "negative-patience",
+        "lookahead-type",
+        "obstacle-contains-base",
+        "obstacle-contains-start",
+        "missing-catalog",
+    ],
 )
 def test_scenario_errors_name_file_line_key(tmp_path, old, new, needle, message):
     path = _scenario(tmp_path, old, new)
@@ -149,7 +236,9 @@ def test_scenario_errors_name_file_line_key(tmp_path, old, new, needle, message)
 def test_catalogue_error_inside_a_scenario_names_the_catalogue(tmp_path):
     path = _scenario(tmp_path, "name: paper", "name: paper")
     (tmp_path / "catalogs" / "paper.yaml").write_text(CATALOG_TEXT.replace("mass: 0.9", "mass: -0.9"))
-    with pytest.raises(CatalogError, match=r"catalogs/paper.yaml:\d+: modules\[2\].mass: expected a number > 0, got -0.9$"):
+    with pytest.raises(
+        CatalogError, match=r"catalogs/paper.yaml:\d+: modules\[2\].mass: expected a number > 0, got -0.9$"
+    ):
         load_scenario(path)
 
 
@@ -157,7 +246,12 @@ def test_shipped_scenarios_load():
     paper = load_scenario(PAPER_SCENARIO)
     assert paper.task.payload == 50.0 and paper.task.start == (1.5, 1.5, 2.0) and paper.task.goal == (-2.0, -1.2, 0.6)
     assert [(o.center, o.radius) for o in paper.task.obstacles] == [((1.5, -1.3, 1.1), 0.3), ((-1.2, 2.1, 0.8), 0.35)]
-    assert (paper.optimizer.nodes, paper.pruning.rule, paper.pruning.threshold, paper.pruning.start_iteration) == (8, "ratio", 0.5, 2)
+    assert (paper.optimizer.nodes, paper.pruning.rule, paper.pruning.threshold, paper.pruning.start_iteration) == (
+        8,
+        "ratio",
+        0.5,
+        2,
+    )
     assert (paper.pruning.window, paper.pruning.lookahead, paper.pruning.patience) == (8, 2.0, 75)  # defaults
     five = load_scenario(PAPER_SCENARIO.with_name("paper-5kg.yaml"))
     assert five.task.payload == 5.0 and five.task.obstacles == paper.task.obstacles and five.catalog == paper.catalog

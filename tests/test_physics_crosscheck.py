@@ -254,9 +254,7 @@ def test_tool_position_and_jacobian_match_spec_chain(cat, name):
         np.testing.assert_allclose(r.tool_position(q), tool[:3, 3], rtol=0, atol=1e-12)
         # tool0 orientation too (tool_position has just updated r.data's frame placements)
         np.testing.assert_allclose(r.data.oMf[r.tool_frame_id].rotation, tool[:3, :3], rtol=0, atol=1e-12)
-        jac = np.column_stack(
-            [np.cross(z, tool[:3, 3] - o) if kind == "revolute" else z for kind, z, o in joints]
-        )
+        jac = np.column_stack([np.cross(z, tool[:3, 3] - o) if kind == "revolute" else z for kind, z, o in joints])
         np.testing.assert_allclose(r.tool_jacobian(q), jac, rtol=0, atol=1e-12)
 
 
@@ -295,8 +293,9 @@ def test_newton_euler_reference_is_sensitive():
     assert tau == pytest.approx([2.0 * 12.81], abs=1e-12)
     # a revolute joint whose axis is world +y (Rx(-90°) first), point mass 1 kg at body x = 0.5 m,
     # i.e. at world (0.5 cos q, 0, -0.5 sin q): V = -m g 0.5 sin(q), holding torque dV/dq
-    arm = Module("R", "joint", "revolute", 0.0, 0.1, 1.0, (0.5, 0.0, 0.0), (0.0,) * 6,
-                 twist_in=-math.pi / 2, limits=lim)
+    arm = Module(
+        "R", "joint", "revolute", 0.0, 0.1, 1.0, (0.5, 0.0, 0.0), (0.0,) * 6, twist_in=-math.pi / 2, limits=lim
+    )
     for qq in (0.0, 0.4):
         tau = newton_euler([arm], [qq], [0.0], [0.0], 0.0, [0.0, 0.0, -9.81])
         assert tau == pytest.approx([-9.81 * 0.5 * math.cos(qq)], abs=1e-12)
@@ -345,8 +344,12 @@ def test_aba_inverts_independent_inverse_dynamics(cat, family, name, payload):
 # --------------------------------------------------------------------------------------------
 # 5. total mass
 # --------------------------------------------------------------------------------------------
-MASS_CASES = [("B-J1-L2-E1", 0.0), ("B-J2-L1-J1-L3-E2", 5.0), ("B-J1-L3-J1-L3-J1-L2-J1-L1-E1", 50.0),
-              ("B-J2-L3-J2-L1-J2-L1-J2-L3-E2", 2.5)]
+MASS_CASES = [
+    ("B-J1-L2-E1", 0.0),
+    ("B-J2-L1-J1-L3-E2", 5.0),
+    ("B-J1-L3-J1-L3-J1-L2-J1-L1-E1", 50.0),
+    ("B-J2-L3-J2-L1-J2-L1-J2-L3-E2", 2.5),
+]
 
 
 @pytest.mark.parametrize("name,payload", MASS_CASES, ids=[f"{n}+{p:g}kg" for n, p in MASS_CASES])
@@ -399,8 +402,12 @@ def test_gravity_torque_hand_cases(cat, payload):
 # --------------------------------------------------------------------------------------------
 # 7. MuJoCo as an independent engine
 # --------------------------------------------------------------------------------------------
-MJ_CASES = [("B-J1-L1-J2-L3-E1", 0.0), ("B-J1-L3-J1-L3-J1-L2-J1-L1-E1", 5.0),
-            ("B-J2-L3-J2-L1-E2", 5.0), ("B-J2-L1-J1-L3-J1-L2-J2-L1-E2", 50.0)]
+MJ_CASES = [
+    ("B-J1-L1-J2-L3-E1", 0.0),
+    ("B-J1-L3-J1-L3-J1-L2-J1-L1-E1", 5.0),
+    ("B-J2-L3-J2-L1-E2", 5.0),
+    ("B-J2-L1-J1-L3-J1-L2-J2-L1-E2", 50.0),
+]
 
 
 def _mujoco_model(urdf_text: str, gravity):

@@ -32,19 +32,17 @@ import pytest
 from click.testing import CliRunner
 from scipy.integrate import solve_ivp
 
-from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem
 from modular_robots.cli import main
-from modular_robots.scenario import SphereObstacle
 from modular_robots.composition import Composition
-from modular_robots.feasibility import check_composition
 from modular_robots.exceptions import CompositionError
-from modular_robots.ocp.candidate import make_candidate
-from modular_robots.pipeline import candidate_specs, optimize_composition
-from modular_robots.robot import Primitive, RobotModel
-from modular_robots.scenario import OptimizerSettings, load_scenario
+from modular_robots.feasibility import check_composition
+from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem, make_candidate
 from modular_robots.ocp.shooting import NonFiniteError, ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
 from modular_robots.ocp.verification import Verification, sample_trajectory, verify
+from modular_robots.pipeline import candidate_specs, optimize_composition
+from modular_robots.robot import Primitive, RobotModel
+from modular_robots.scenario import OptimizerSettings, SphereObstacle, load_scenario
 
 from .conftest import PAPER_5KG
 
@@ -65,11 +63,18 @@ def rotor(inertia: float, tau_max: float, v_max: float, arm: float = 0.5) -> Rob
     axis), no gravity; ``tool0`` sits ``arm`` metres off the axis so the tool moves."""
     model = pin.Model()
     model.name = "rotor"
-    joint = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "joint1", np.array([tau_max]),
-                           np.array([v_max]), np.array([-4.0]), np.array([4.0]))
+    joint = model.addJoint(
+        0,
+        pin.JointModelRZ(),
+        pin.SE3.Identity(),
+        "joint1",
+        np.array([tau_max]),
+        np.array([v_max]),
+        np.array([-4.0]),
+        np.array([4.0]),
+    )
     model.appendBodyToJoint(joint, pin.Inertia(1.0, np.zeros(3), inertia * np.eye(3)), pin.SE3.Identity())
-    model.addFrame(pin.Frame("tool0", joint, 0, pin.SE3(np.eye(3), np.array([arm, 0.0, 0.0])),
-                             pin.FrameType.OP_FRAME))
+    model.addFrame(pin.Frame("tool0", joint, 0, pin.SE3(np.eye(3), np.array([arm, 0.0, 0.0])), pin.FrameType.OP_FRAME))
     model.gravity = pin.Motion.Zero()
     return RobotModel(model, "tool0", name="rotor")
 
@@ -90,10 +95,17 @@ def planar_arm() -> RobotModel:
     rod = np.diag([1e-4, M_LINK * L_LINK**2 / 12, M_LINK * L_LINK**2 / 12])
     parent, placement, primitives = 0, pin.SE3.Identity(), []
     for k in range(2):
-        joint = model.addJoint(parent, pin.JointModelRZ(), placement, f"joint{k + 1}", ARM_TAU[k:k + 1],
-                               ARM_VEL[k:k + 1], np.array([-3.0]), np.array([3.0]))
-        model.appendBodyToJoint(joint, pin.Inertia(M_LINK, np.array([L_LINK / 2, 0.0, 0.0]), rod),
-                                pin.SE3.Identity())
+        joint = model.addJoint(
+            parent,
+            pin.JointModelRZ(),
+            placement,
+            f"joint{k + 1}",
+            ARM_TAU[k : k + 1],
+            ARM_VEL[k : k + 1],
+            np.array([-3.0]),
+            np.array([3.0]),
+        )
+        model.appendBodyToJoint(joint, pin.Inertia(M_LINK, np.array([L_LINK / 2, 0.0, 0.0]), rod), pin.SE3.Identity())
         model.addFrame(pin.Frame(f"link{k + 1}", joint, 0, pin.SE3(along_x, np.zeros(3)), pin.FrameType.OP_FRAME))
         primitives.append(Primitive(f"link{k + 1}", f"link{k + 1}", R_LINK, L_LINK, 0.0, k))
         parent, placement = joint, pin.SE3(np.eye(3), np.array([L_LINK, 0.0, 0.0]))
@@ -142,6 +154,7 @@ def replay_arm(problem: ShootingProblem, y: np.ndarray, points_per_interval: int
     x = problem.x_start.copy()
     qs, vs = [], []
     for node, u in zip(nodes[:-1], controls):
+
         def torque(s, node=node, u=u):
             if problem.transcription.controls_are_torques:
                 return u
@@ -164,8 +177,11 @@ def replay_arm(problem: ShootingProblem, y: np.ndarray, points_per_interval: int
 
 def ur5(payload: float) -> RobotModel:
     """The UR5 of example-robot-data with a solid-sphere payload (radius 5 cm) centred at tool0."""
-    path = next(f.locate() for f in importlib.metadata.files("example-robot-data")
-                if str(f).endswith("ur_description/urdf/ur5_robot.urdf"))
+    path = next(
+        f.locate()
+        for f in importlib.metadata.files("example-robot-data")
+        if str(f).endswith("ur_description/urdf/ur5_robot.urdf")
+    )
     model = pin.buildModelFromUrdf(str(path))
     tool = model.frames[model.getFrameId("tool0")]
     model.appendBodyToJoint(tool.parentJoint, pin.Inertia.FromSphere(payload, 0.05), tool.placement)
@@ -202,7 +218,7 @@ def perturbed_guess(problem: ShootingProblem, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     step = 0.05 * rng.standard_normal(problem.n_variables)
     if problem.transcription.controls_are_torques:
-        step[1 + (problem.intervals - 1) * problem.nx:] *= 0.1
+        step[1 + (problem.intervals - 1) * problem.nx :] *= 0.1
     return problem.initial_guess() + step
 
 
@@ -271,7 +287,8 @@ def test_effort_cost_gradient_matches_central_differences(paper, transcription):
     assert err < 1e-5, (err, 1 + int(np.argmax(np.abs(gradient[1:] - fd[1:]))))
     # the final time: the cost is tf times the mean squared torque ratio
     assert gradient[0] == pytest.approx(fd[0], rel=1e-5, abs=1e-5 * scale), (
-        f"d cost / d tf: exact {gradient[0]:.6g}, finite differences {fd[0]:.6g}")
+        f"d cost / d tf: exact {gradient[0]:.6g}, finite differences {fd[0]:.6g}"
+    )
     # the effort gradient depends on the controls (and, for inverse, on the states)
     u0 = 1 + (problem.intervals - 1) * problem.nx
     assert np.abs(gradient[u0:]).max() > 1e-3
@@ -283,8 +300,13 @@ def test_clearance_gradient_matches_finite_differences_on_the_arm():
     """The distance gradient the Jacobian is built from, against a closed-form distance."""
     robot = planar_arm()
     obstacle = SphereObstacle((1.3, 0.9, 0.0), 0.2)
-    problem = ShootingProblem(robot, [-1.0, 0.5], [1.0, -0.5], [obstacle],
-                              settings=OptimizerSettings(nodes=4, substeps=2, transcription="inverse"))
+    problem = ShootingProblem(
+        robot,
+        [-1.0, 0.5],
+        [1.0, -0.5],
+        [obstacle],
+        settings=OptimizerSettings(nodes=4, substeps=2, transcription="inverse"),
+    )
     rng = np.random.default_rng(3)
     checked = 0
     for q in rng.uniform(-2.5, 2.5, (10, 2)):
@@ -327,8 +349,9 @@ ROTOR_CASES = {
 def test_rotor_reaches_the_analytic_minimum_time(case, transcription):
     v_max, dq, nodes, expected = ROTOR_CASES[case]
     robot = rotor(I_ROTOR, TAU_ROTOR, v_max)
-    problem = ShootingProblem(robot, [-0.5], [-0.5 + dq],
-                              settings=OptimizerSettings(nodes=nodes, substeps=2, transcription=transcription))
+    problem = ShootingProblem(
+        robot, [-0.5], [-0.5 + dq], settings=OptimizerSettings(nodes=nodes, substeps=2, transcription=transcription)
+    )
     outcome = ShootingSolver(problem).solve()
     assert outcome.status == "optimal", outcome.reason
     tf = outcome.final.tf
@@ -363,13 +386,15 @@ def test_rotor_reaches_the_analytic_minimum_time(case, transcription):
         assert np.all(np.abs(trajectory.tau[cruise, 0]) < 0.05 * TAU_ROTOR)
 
 
-@pytest.mark.parametrize(("v_max", "cost", "expected"), [(2.0, "time", 0.75), (np.inf, "time", 0.0),
-                                                       (2.0, "effort", 0.0)])
+@pytest.mark.parametrize(
+    ("v_max", "cost", "expected"), [(2.0, "time", 0.75), (np.inf, "time", 0.0), (2.0, "effort", 0.0)]
+)
 def test_cost_bound_counts_only_velocity_limited_joints_of_the_time_cost(v_max, cost, expected):
     """1.5 rad at 2 rad/s takes at least 0.75 s; a joint without a velocity limit bounds nothing,
     and neither does the effort cost."""
-    problem = ShootingProblem(rotor(I_ROTOR, TAU_ROTOR, v_max), [-0.5], [1.0], cost=cost,
-                              settings=OptimizerSettings(nodes=3, substeps=1))
+    problem = ShootingProblem(
+        rotor(I_ROTOR, TAU_ROTOR, v_max), [-0.5], [1.0], cost=cost, settings=OptimizerSettings(nodes=3, substeps=1)
+    )
     assert problem.cost_bound == expected
 
 
@@ -382,8 +407,9 @@ ARM_START, ARM_GOAL = [-1.2, 0.3], [1.2, -0.3]
 ARM_OBSTACLE = SphereObstacle((1.9, 0.0, 0.0), 0.2)
 
 
-@pytest.mark.parametrize(("transcription", "guess"),
-                         [("inverse", "straight"), ("forward", "straight"), ("inverse", "default")])
+@pytest.mark.parametrize(
+    ("transcription", "guess"), [("inverse", "straight"), ("forward", "straight"), ("inverse", "default")]
+)
 def test_obstacle_on_the_straight_line_is_avoided(transcription, guess):
     """``straight`` forces the straight-line guess through the sphere (``waypoints``);
     ``default`` lets the problem pick its own guess (a clear detour when the line collides)."""
@@ -392,9 +418,15 @@ def test_obstacle_on_the_straight_line_is_avoided(transcription, guess):
     line = np.array([ARM_START, ARM_GOAL])
     samples = [line[0] + s * (line[1] - line[0]) for s in np.linspace(0, 1, 201)]
     assert min(arm_clearance(q, ARM_OBSTACLE) for q in samples) < -0.2
-    problem = ShootingProblem(robot, ARM_START, ARM_GOAL, [ARM_OBSTACLE], "time",
-                              OptimizerSettings(nodes=8, substeps=4, transcription=transcription),
-                              waypoints=line if guess == "straight" else None)
+    problem = ShootingProblem(
+        robot,
+        ARM_START,
+        ARM_GOAL,
+        [ARM_OBSTACLE],
+        "time",
+        OptimizerSettings(nodes=8, substeps=4, transcription=transcription),
+        waypoints=line if guess == "straight" else None,
+    )
     assert min(problem.collision.min_distance(q) for q in samples) < -0.2
     if guess == "straight" and transcription == "inverse":
         # the inverse guess moves along the line (parabolas between nodes on it). The forward
@@ -421,8 +453,9 @@ def test_ur5_with_payload_solves_and_verifies():
     robot = ur5(payload=2.0)
     q_start = np.array([0.0, -1.57, 1.57, -1.57, -1.57, 0.0])
     q_goal = np.array([1.2, -1.0, 1.0, -1.5, -1.2, 0.5])
-    problem = ShootingProblem(robot, q_start, q_goal,
-                              settings=OptimizerSettings(nodes=6, substeps=4, transcription="inverse"))
+    problem = ShootingProblem(
+        robot, q_start, q_goal, settings=OptimizerSettings(nodes=6, substeps=4, transcription="inverse")
+    )
     # the payload is in the model: holding still at the start takes more torque with it
     assert np.abs(robot.gravity(q_start)).max() > np.abs(ur5(0.0).gravity(q_start)).max() + 1.0
     result = Candidate(problem).solve()
@@ -468,8 +501,9 @@ def test_verification_defect_catches_a_broken_plan():
     each sub-step follows its parabola exactly, so the defect is the continuity gap; the forward
     transcription's RK4 error is caught in the refinement test below)."""
     robot = planar_arm()
-    problem = ShootingProblem(robot, ARM_START, ARM_GOAL, settings=OptimizerSettings(nodes=6, substeps=4,
-                                                                                       transcription="inverse"))
+    problem = ShootingProblem(
+        robot, ARM_START, ARM_GOAL, settings=OptimizerSettings(nodes=6, substeps=4, transcription="inverse")
+    )
     outcome = ShootingSolver(problem).solve()
     assert outcome.status == "optimal", outcome.reason
     good = verify(problem, outcome.final.y)
@@ -484,8 +518,12 @@ def test_verification_defect_catches_a_broken_plan():
 # 5. the solver's generator semantics
 # --------------------------------------------------------------------------------------------
 def small_problem() -> ShootingProblem:
-    return ShootingProblem(rotor(I_ROTOR, TAU_ROTOR, V_TRAP), [-0.5], [-0.5 + DQ_TRAP],
-                           settings=OptimizerSettings(nodes=9, substeps=2, transcription="forward"))
+    return ShootingProblem(
+        rotor(I_ROTOR, TAU_ROTOR, V_TRAP),
+        [-0.5],
+        [-0.5 + DQ_TRAP],
+        settings=OptimizerSettings(nodes=9, substeps=2, transcription="forward"),
+    )
 
 
 def test_iterate_yields_increasing_iterations_then_sets_the_outcome():
@@ -609,6 +647,7 @@ def test_evaluation_error_fails_with_its_reason():
 def test_refinement_stops_when_a_clearance_deficit_does_not_shrink():
     """A sampling error shrinks with the sub-step; a link crossing an obstacle between two clear
     sub-steps stays as deep, and refining it again only costs time."""
+
     def checked(clearance):
         return Verification(0.0, 0.0, 0.0, clearance, 0.0, 1.0, 1.0, 100, 4)
 
@@ -645,8 +684,9 @@ def test_the_clear_boundary_pair_verifies_where_the_fastest_pair_crosses_an_obst
     assert winner["verification"]["passed"] and winner["verification"]["min_clearance"] >= 0.0
     with open(tmp_path / "trajectory.csv") as f:
         first = next(csv.DictReader(f))
-    np.testing.assert_allclose([float(first[f"q{i + 1}"]) for i in range(len(verdict.q_start))],
-                               verdict.clear_pair[0], atol=1e-9)
+    np.testing.assert_allclose(
+        [float(first[f"q{i + 1}"]) for i in range(len(verdict.q_start))], verdict.clear_pair[0], atol=1e-9
+    )
 
 
 def test_a_composition_without_a_clear_pair_has_one_candidate():
@@ -656,9 +696,12 @@ def test_a_composition_without_a_clear_pair_has_one_candidate():
     verdict = check_composition(composition, scenario.catalog, scenario.task)
     assert verdict.passed and verdict.clear_pair is None
     assert [s.name for s in candidate_specs([verdict])] == [name]
-    with pytest.raises(CompositionError, match=r"^B-J1-L1-J1-L3-J1-L3-J1-L1-E1 has no clear boundary pair: the "
-                                               r"straight line of its fastest pair already clears the obstacles, "
-                                               r"or no pair's line does$"):
+    with pytest.raises(
+        CompositionError,
+        match=r"^B-J1-L1-J1-L3-J1-L3-J1-L1-E1 has no clear boundary pair: the "
+        r"straight line of its fastest pair already clears the obstacles, "
+        r"or no pair's line does$",
+    ):
         optimize_composition(scenario, f"{name}+clear")
 
 
@@ -678,6 +721,6 @@ def test_refinement_doubles_substeps_until_the_motion_verifies():
     assert result.status == "optimal", result.reason
     assert result.substeps > 1
     assert result.verification.passed and result.verification.substeps == result.substeps
-    q, v, end = replay_arm(coarse_problem.refined(result.substeps, result.waypoints), result.y)
+    _, v, end = replay_arm(coarse_problem.refined(result.substeps, result.waypoints), result.y)
     assert np.linalg.norm(arm_points(end[:2])[2] - arm_points(ARM_GOAL)[2]) <= 0.01
     assert np.all(np.abs(v) <= ARM_VEL * (1.0 + 2e-3))

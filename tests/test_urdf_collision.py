@@ -170,7 +170,8 @@ def test_the_overlap_that_aborts_fcl_signed_distance_is_measured(tmp_path):
     exactly as recorded and measured in a child process, so a regression fails this test instead
     of killing the test run."""
     script = tmp_path / "overlap.py"
-    script.write_text(textwrap.dedent("""
+    script.write_text(
+        textwrap.dedent("""
         import fcl, numpy as np
         from modular_robots import Composition, SphereObstacle, load_catalog
         from modular_robots.collision import CollisionModel
@@ -187,9 +188,15 @@ def test_the_overlap_that_aborts_fcl_signed_distance_is_measured(tmp_path):
         model._robot_objects[port].setTransform(fcl.Transform(rot, at))
         d, on_robot, on_obstacle = model._pair_distance(port, 0, at, rot[:, 2])
         print(float(d), float(np.linalg.norm(at - center) - 0.45), float(np.linalg.norm(on_robot - on_obstacle)))
-    """))
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
-                          cwd=Path(__file__).resolve().parents[1])
+    """)
+    )
+    done = subprocess.run(
+        [sys.executable, str(script)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=Path(__file__).resolve().parents[1],
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     d, expected, gap = map(float, done.stdout.split())
     assert d == pytest.approx(expected, abs=1e-15) and d == pytest.approx(-0.00446, abs=1e-5)

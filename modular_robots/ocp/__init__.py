@@ -9,8 +9,15 @@ generator per candidate, the unit that step D advances in lockstep. Step C takes
 (:class:`~modular_robots.ocp.candidate.CandidateSpec`), never step B's cascade.
 """
 
-from .candidate import (BoundaryPair, Candidate, CandidateResult, CandidateSpec, CandidateStatus,
-                        composition_problem, make_candidate)
+from .candidate import (
+    BoundaryPair,
+    Candidate,
+    CandidateResult,
+    CandidateSpec,
+    CandidateStatus,
+    composition_problem,
+    make_candidate,
+)
 from .shooting import NonFiniteError, ShootingProblem
 from .solver import Iterate, ShootingSolver, SolverOutcome
 from .verification import Trajectory, Verification, sample_trajectory, verify

@@ -27,8 +27,15 @@ from .shooting import ShootingProblem
 from .solver import Iterate, ShootingSolver
 from .verification import Trajectory, Verification, sample_trajectory, verify
 
-__all__ = ["BoundaryPair", "Candidate", "CandidateResult", "CandidateSpec", "CandidateStatus", "composition_problem",
-           "make_candidate"]
+__all__ = [
+    "BoundaryPair",
+    "Candidate",
+    "CandidateResult",
+    "CandidateSpec",
+    "CandidateStatus",
+    "composition_problem",
+    "make_candidate",
+]
 
 
 class CandidateStatus(StrEnum):
@@ -133,8 +140,12 @@ class CandidateResult:
         }
 
     def pruned(self, iteration: int) -> CandidateResult:
-        return replace(self, status=CandidateStatus.PRUNED, reason=f"pruned at iteration {iteration}",
-                       pruned_at_iteration=iteration)
+        return replace(
+            self,
+            status=CandidateStatus.PRUNED,
+            reason=f"pruned at iteration {iteration}",
+            pruned_at_iteration=iteration,
+        )
 
 
 def _finite(value: float) -> float | None:
@@ -173,10 +184,17 @@ class Candidate:
         Only a failed candidate pays for it, so the candidates that converge are unchanged.
     """
 
-    def __init__(self, problem: ShootingProblem, name: str | None = None, max_refinements: int = 3,
-                 jacobian: str = "exact", restart: bool = True, composition: str | None = None,
-                 boundary_pair: BoundaryPair = BoundaryPair.FASTEST,
-                 swing: bool = True):
+    def __init__(
+        self,
+        problem: ShootingProblem,
+        name: str | None = None,
+        max_refinements: int = 3,
+        jacobian: str = "exact",
+        restart: bool = True,
+        composition: str | None = None,
+        boundary_pair: BoundaryPair = BoundaryPair.FASTEST,
+        swing: bool = True,
+    ):
         self.problem = problem
         self.restart = restart
         self.swing = swing
@@ -241,8 +259,11 @@ class Candidate:
         y0, offset, verification = None, 0, None
         for attempt in range(self.max_refinements + 1):
             outcome = yield from self._solve_restarting(self.problem, y0, offset, attempt)
-            swung = swing_path(self.problem.robot, self.problem.collision, self.problem.waypoints) if (
-                outcome.status != "optimal" and attempt == 0 and self.swing) else None
+            swung = (
+                swing_path(self.problem.robot, self.problem.collision, self.problem.waypoints)
+                if (outcome.status != "optimal" and attempt == 0 and self.swing)
+                else None
+            )
             if swung is not None:
                 self._note = f" (from a swing guess; from the first guess: {outcome.reason})"
                 offset = self.last.iteration if self.last is not None else 0
@@ -275,23 +296,38 @@ class Candidate:
         last, problem = self.last, self.problem
         optimal = status == CandidateStatus.OPTIMAL
         self.result = CandidateResult(
-            name=self.name, dof=problem.nv, status=CandidateStatus(status), reason=reason,
-            iterations=last.iteration if last else 0, seconds=self._seconds,
-            cost=last.cost if last else np.nan, tf=last.tf if last else np.nan,
+            name=self.name,
+            dof=problem.nv,
+            status=CandidateStatus(status),
+            reason=reason,
+            iterations=last.iteration if last else 0,
+            seconds=self._seconds,
+            cost=last.cost if last else np.nan,
+            tf=last.tf if last else np.nan,
             constraint_violation=last.constraint_violation if last else np.nan,
-            cost_history=tuple(self.history), violation_history=tuple(self.violations),
-            verification=verification, substeps=problem.substeps, cost_bound=problem.cost_bound,
-            composition=self.composition, boundary_pair=self.boundary_pair,
-            y=last.y if last else None, waypoints=problem.waypoints,
+            cost_history=tuple(self.history),
+            violation_history=tuple(self.violations),
+            verification=verification,
+            substeps=problem.substeps,
+            cost_bound=problem.cost_bound,
+            composition=self.composition,
+            boundary_pair=self.boundary_pair,
+            y=last.y if last else None,
+            waypoints=problem.waypoints,
             trajectory=sample_trajectory(problem, last.y) if optimal else None,
-            urdf=problem.robot.urdf if optimal else None)
+            urdf=problem.robot.urdf if optimal else None,
+        )
 
 
 def _crossing(previous: Verification | None, v: Verification) -> bool:
     """True if a refinement left more than half the clearance deficit (see ``max_refinements``): a
     sampling error shrinks to about a quarter when the sub-steps are halved."""
-    return (previous is not None and not previous.clearance_ok and not v.clearance_ok
-            and v.min_clearance <= 0.5 * previous.min_clearance)
+    return (
+        previous is not None
+        and not previous.clearance_ok
+        and not v.clearance_ok
+        and v.min_clearance <= 0.5 * previous.min_clearance
+    )
 
 
 def _verification_failure(v: Verification) -> str:
@@ -303,13 +339,21 @@ def _verification_failure(v: Verification) -> str:
     if not v.clearance_ok:
         parts.append(f"clearance {v.min_clearance:.4f} m < 0 between sub-steps")
     if not v.limits_ok:
-        parts.append(f"limits exceeded (velocity x{v.velocity_ratio:.3f}, torque x{v.torque_ratio:.3f}, "
-                     f"position +{v.position_excess:.2g} of the range)")
+        parts.append(
+            f"limits exceeded (velocity x{v.velocity_ratio:.3f}, torque x{v.torque_ratio:.3f}, "
+            f"position +{v.position_excess:.2g} of the range)"
+        )
     return f"verification failed after {v.substeps} sub-steps per interval: " + "; ".join(parts)
 
 
-def composition_problem(composition: Composition, catalog: Catalog, task: Task, q_start: Sequence[float],
-                        q_goal: Sequence[float], settings: OptimizerSettings = OptimizerSettings()) -> ShootingProblem:
+def composition_problem(
+    composition: Composition,
+    catalog: Catalog,
+    task: Task,
+    q_start: Sequence[float],
+    q_goal: Sequence[float],
+    settings: OptimizerSettings = OptimizerSettings(),
+) -> ShootingProblem:
     """The shooting problem of ``composition`` for ``task``, from rest at ``q_start`` to rest at
     ``q_goal`` (step B's boundary configurations, :class:`CandidateSpec`)."""
     robot = robot_model(composition, catalog, task.payload)
@@ -328,6 +372,7 @@ def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:
     sub-steps, which verification rejects. The clear pair avoids that start. So a composition with
     both is optimised from both, as two candidates (``docs/known-limits.md``).
     """
-    problem = composition_problem(spec.composition, scenario.catalog, scenario.task, spec.q_start, spec.q_goal,
-                                  scenario.optimizer)
+    problem = composition_problem(
+        spec.composition, scenario.catalog, scenario.task, spec.q_start, spec.q_goal, scenario.optimizer
+    )
     return Candidate(problem, spec.name, composition=spec.composition.name, boundary_pair=spec.boundary_pair)

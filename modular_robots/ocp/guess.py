@@ -40,6 +40,7 @@ SWING = (1.0, 0.5)
 #: Below this share of a joint's torque limit, holding an end still is easy and no swing is tried.
 LOADED = 0.5
 
+
 def path_times(robot: RobotModel, path: np.ndarray) -> np.ndarray:
     """Seconds each segment of the polyline ``path`` ``(K, nv)`` takes with its busiest joint at
     its velocity limit."""
@@ -47,8 +48,13 @@ def path_times(robot: RobotModel, path: np.ndarray) -> np.ndarray:
     return np.max(np.abs(np.diff(path, axis=0)) / vmax, axis=1)
 
 
-def detour_path(robot: RobotModel, collision: CollisionModel | None, q_start: np.ndarray,
-                q_goal: np.ndarray, trials: int = GUESS_TRIALS) -> np.ndarray:
+def detour_path(
+    robot: RobotModel,
+    collision: CollisionModel | None,
+    q_start: np.ndarray,
+    q_goal: np.ndarray,
+    trials: int = GUESS_TRIALS,
+) -> np.ndarray:
     """The straight line ``(q_start, q_goal)`` if it clears the obstacles, else the fastest of
     ``trials`` seeded random one-via detours that does (the straight line if none does)."""
     straight = np.array([q_start, q_goal], dtype=float)
@@ -66,8 +72,14 @@ def detour_path(robot: RobotModel, collision: CollisionModel | None, q_start: np
     return best
 
 
-def swing_path(robot: RobotModel, collision: CollisionModel | None, path: np.ndarray,
-               swings: tuple[float, ...] = SWING, loaded: float = LOADED, samples: int = 12) -> np.ndarray | None:
+def swing_path(
+    robot: RobotModel,
+    collision: CollisionModel | None,
+    path: np.ndarray,
+    swings: tuple[float, ...] = SWING,
+    loaded: float = LOADED,
+    samples: int = 12,
+) -> np.ndarray | None:
     """``path`` with one more via next to whichever end needs the larger share of a joint's
     torque limit to hold still: that end with its most loaded joint moved by one of ``swings``
     [rad], either way, so that the arm arrives there from (or leaves it to) the side where

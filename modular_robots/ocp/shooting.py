@@ -51,9 +51,9 @@ from scipy import sparse
 
 from ..collision import CollisionModel, SphereObstacle
 from ..exceptions import ModularRobotsError
-from .guess import detour_path, path_times
 from ..robot import RobotModel
 from ..scenario import COSTS, OptimizerSettings
+from .guess import detour_path, path_times
 from .transcription import Propagation, positive_or_one, transcription
 
 __all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
@@ -100,13 +100,22 @@ class ShootingProblem:
         (default: :func:`~modular_robots.ocp.guess.detour_path`).
     """
 
-    def __init__(self, robot: RobotModel, q_start: Sequence[float], q_goal: Sequence[float],
-                 obstacles: Sequence[SphereObstacle] = (), cost: str = "time",
-                 settings: OptimizerSettings = OptimizerSettings(), substeps: int | None = None,
-                 waypoints: np.ndarray | None = None):
+    def __init__(
+        self,
+        robot: RobotModel,
+        q_start: Sequence[float],
+        q_goal: Sequence[float],
+        obstacles: Sequence[SphereObstacle] = (),
+        cost: str = "time",
+        settings: OptimizerSettings = OptimizerSettings(),
+        substeps: int | None = None,
+        waypoints: np.ndarray | None = None,
+    ):
         if robot.nq != robot.nv:
-            raise ValueError(f"robot {robot.name!r}: nq = {robot.nq} != nv = {robot.nv}; only joints "
-                             f"whose configuration is their coordinate (revolute, prismatic) are supported")
+            raise ValueError(
+                f"robot {robot.name!r}: nq = {robot.nq} != nv = {robot.nv}; only joints "
+                f"whose configuration is their coordinate (revolute, prismatic) are supported"
+            )
         if settings.nodes < 3:
             raise ValueError(f"nodes must be >= 3 (two or more intervals), got {settings.nodes}")
         if cost not in COSTS:
@@ -128,7 +137,7 @@ class ShootingProblem:
             for label, q in (("q_start", self.q_start), ("q_goal", self.q_goal)):
                 if self.collision.min_distance(q) < 0.0:
                     raise ValueError(f"{label} is in collision with an obstacle")
-        N, S = self.intervals, self.substeps
+        N = self.intervals
         #: A lower bound of the cost [s]: for ``time``, no plan within the velocity limits is faster
         #: than the busiest joint moving at its limit all the way (``RobotModel.travel_time_bound``);
         #: 0 for ``effort``. Used by step D to prune a candidate before it is solved.
@@ -136,8 +145,11 @@ class ShootingProblem:
         self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
         self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
 
-        self.waypoints = (detour_path(robot, self.collision, self.q_start, self.q_goal) if waypoints is None
-                          else np.asarray(waypoints, dtype=float))
+        self.waypoints = (
+            detour_path(robot, self.collision, self.q_start, self.q_goal)
+            if waypoints is None
+            else np.asarray(waypoints, dtype=float)
+        )
         self.tf_guess, guess_nodes, guess_acc = self._initial_motion()
         #: The cost in its unit [s] is the scaled cost times this.
         self.cost_unit = self.tf_guess
@@ -149,10 +161,8 @@ class ShootingProblem:
         self.tau_scale = positive_or_one(robot.effort_limit)
         self.n_variables = 1 + (N - 1) * n + N * nv
         self._u0 = 1 + (N - 1) * n
-        self.variable_scale = np.concatenate([[self.tf_guess], np.tile(self.x_scale, N - 1),
-                                              np.tile(self.u_scale, N)])
-        guess_u = self.transcription.initial_controls(robot, guess_nodes[:-1, :nv], guess_nodes[:-1, nv:],
-                                                      guess_acc)
+        self.variable_scale = np.concatenate([[self.tf_guess], np.tile(self.x_scale, N - 1), np.tile(self.u_scale, N)])
+        guess_u = self.transcription.initial_controls(robot, guess_nodes[:-1, :nv], guess_nodes[:-1, nv:], guess_acc)
         if self.transcription.controls_are_torques:
             guess_u = np.clip(guess_u, -robot.effort_limit, robot.effort_limit)
         self._guess = self.pack(self.tf_guess, guess_nodes, guess_u)
@@ -169,9 +179,9 @@ class ShootingProblem:
     def unpack(self, y: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """``(tf, nodes (N + 1, 2 nv), controls (N, nv))`` in SI units from a scaled vector."""
         z = np.asarray(y, dtype=float) * self.variable_scale
-        inner = z[1:self._u0].reshape(self.intervals - 1, self.nx)
+        inner = z[1 : self._u0].reshape(self.intervals - 1, self.nx)
         nodes = np.vstack([self.x_start, inner, self.x_goal])
-        return float(z[0]), nodes, z[self._u0:].reshape(self.intervals, self.nv)
+        return float(z[0]), nodes, z[self._u0 :].reshape(self.intervals, self.nv)
 
     def initial_guess(self) -> np.ndarray:
         """Straight line in joint space (or a clear detour, see :mod:`~modular_robots.ocp.guess`), a trapezoidal
@@ -182,9 +192,16 @@ class ShootingProblem:
         """The same problem with ``substeps`` per interval (decision vectors carry over as they
         are) or with the initial guess along ``waypoints`` (they do not: the scaling follows the
         guess)."""
-        return ShootingProblem(self.robot, self.q_start, self.q_goal, self.obstacles, self.cost_name,
-                               self.settings, substeps or self.substeps,
-                               self.waypoints if waypoints is None else waypoints)
+        return ShootingProblem(
+            self.robot,
+            self.q_start,
+            self.q_goal,
+            self.obstacles,
+            self.cost_name,
+            self.settings,
+            substeps or self.substeps,
+            self.waypoints if waypoints is None else waypoints,
+        )
 
     def _configuration(self, q, label) -> np.ndarray:
         q = np.asarray(q, dtype=float).reshape(-1)
@@ -238,8 +255,7 @@ class ShootingProblem:
         p = n + nv + 1
         cols = self._cols = np.array([self._interval_columns(m) for m in range(N)])
         pairs = len(self.obstacles) if self.collision else 0
-        blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S, nv),
-                  ("clearance", S, pairs)]
+        blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S, nv), ("clearance", S, pairs)]
         if not self.transcription.controls_are_torques:
             blocks.append(("torque", S + 1, nv))
         rows, lower, upper, scale = {}, [], [], []
@@ -263,8 +279,7 @@ class ShootingProblem:
                 lo, hi = np.full((N, k, r), self.settings.clearance_margin), np.full((N, k, r), np.inf)
                 sc = np.ones((N, k, r))
             else:
-                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.robot.effort_limit,
-                                                                  self.robot.effort_limit))
+                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.robot.effort_limit, self.robot.effort_limit))
                 sc = np.broadcast_to(self.tau_scale, (N, k, r))
             lower.append(np.ravel(lo))
             upper.append(np.ravel(hi))
@@ -273,10 +288,8 @@ class ShootingProblem:
         self._rows = rows
         self.row_scale = scale
         # Entries in evaluation order: block local Jacobians, then continuity's -I on s_{m+1}.
-        entry_rows = [np.broadcast_to(rows[name][..., None], rows[name].shape + (p,)).ravel()
-                      for name, _, _ in blocks]
-        entry_cols = [np.broadcast_to(cols[:, None, None, :], rows[name].shape + (p,)).ravel()
-                      for name, _, _ in blocks]
+        entry_rows = [np.broadcast_to(rows[name][..., None], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
+        entry_cols = [np.broadcast_to(cols[:, None, None, :], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
         next_cols = np.array([1 + m * n + np.arange(n) if m < N - 1 else np.full(n, -1) for m in range(N)])
         entry_rows.append(rows["continuity"][:, 0, :].ravel())
         entry_cols.append(next_cols.ravel())
@@ -303,15 +316,19 @@ class ShootingProblem:
         """
         y = np.asarray(y, dtype=float)
         key = y.tobytes()
-        if self._cache is not None and self._cache[0] == key and (
-                self._cache[1].jacobian is not None or not derivatives):
+        if (
+            self._cache is not None
+            and self._cache[0] == key
+            and (self._cache[1].jacobian is not None or not derivatives)
+        ):
             return self._cache[1]
         N, S, n, nv = self.intervals, self.substeps, self.nx, self.nv
         tf, nodes, controls = self.unpack(y)
         prop = self.transcription.propagate(self.robot, nodes[:-1], controls, tf, N, S, derivatives)
         if not (np.all(np.isfinite(prop.states)) and np.all(np.isfinite(prop.torques))):
-            raise NonFiniteError(f"the dynamics of {self.robot.name!r} gave non-finite states or torques "
-                                 f"(tf = {tf:.4g} s)")
+            raise NonFiniteError(
+                f"the dynamics of {self.robot.name!r} gave non-finite states or torques (tf = {tf:.4g} s)"
+            )
         middle_q, middle_sens = self._between_substeps(tf, prop, derivatives)
         clear, clear_grad = self._clearance(prop.states[:, :S, :nv].reshape(-1, nv), derivatives)
         values = [
@@ -333,8 +350,9 @@ class ShootingProblem:
                 blocks.append(prop.torque_sens)
             blocks.append(np.full(N * n, -1.0))
             data = np.concatenate([b.ravel() for b in blocks])[self._keep_entry] * self._entry_factor
-            jac = sparse.csr_matrix((data, (self._jac_rows, self._jac_cols)),
-                                    shape=(self.n_constraints, self.n_variables))
+            jac = sparse.csr_matrix(
+                (data, (self._jac_rows, self._jac_cols)), shape=(self.n_constraints, self.n_variables)
+            )
         evaluation = Evaluation(cost, c, prop, clear, cost_grad, jac)
         self._cache = (key, evaluation)
         return evaluation

@@ -96,10 +96,17 @@ class ShootingSolver:
         Added to reported iteration numbers (refinement continues a count).
     """
 
-    def __init__(self, problem: ShootingProblem, y0: np.ndarray | None = None, *,
-                 max_iterations: int | None = None, tolerance: float | None = None,
-                 constraint_tolerance: float | None = None, jacobian: str = "exact",
-                 iteration_offset: int = 0):
+    def __init__(
+        self,
+        problem: ShootingProblem,
+        y0: np.ndarray | None = None,
+        *,
+        max_iterations: int | None = None,
+        tolerance: float | None = None,
+        constraint_tolerance: float | None = None,
+        jacobian: str = "exact",
+        iteration_offset: int = 0,
+    ):
         if jacobian not in ("exact", "finite-difference"):
             raise ValueError(f"jacobian must be 'exact' or 'finite-difference', got {jacobian!r}")
         s = problem.settings
@@ -185,9 +192,13 @@ class ShootingSolver:
                 return self._to_caller.get(timeout=1.0)
             except queue.Empty:
                 if not self._thread.is_alive() and self._to_caller.empty():
-                    return SolverOutcome("failed", "the solver thread ended without an outcome",
-                                         self.last.iteration - self.iteration_offset if self.last else 0,
-                                         self._seconds, self.last)
+                    return SolverOutcome(
+                        "failed",
+                        "the solver thread ended without an outcome",
+                        self.last.iteration - self.iteration_offset if self.last else 0,
+                        self._seconds,
+                        self.last,
+                    )
 
     def _callback(self, intermediate_result) -> bool:
         state = intermediate_result  # scipy passes the new-style result only under this name
@@ -195,9 +206,15 @@ class ShootingSolver:
         problem = self.problem
         y = np.array(state.x, dtype=float)
         tf = float(y[0] * problem.variable_scale[0])
-        iterate = Iterate(self.iteration_offset + int(state.nit), float(state.fun) * problem.cost_unit,
-                          float(state.constr_violation), tf, y, float(state.optimality),
-                          cost_bound=problem.cost_bound)
+        iterate = Iterate(
+            self.iteration_offset + int(state.nit),
+            float(state.fun) * problem.cost_unit,
+            float(state.constr_violation),
+            tf,
+            y,
+            float(state.optimality),
+            cost_bound=problem.cost_bound,
+        )
         self._to_caller.put(iterate)
         self._resume.acquire()
         self._clock = time.perf_counter()
@@ -210,7 +227,7 @@ class ShootingSolver:
         self._clock = time.perf_counter()
         try:
             result = self._minimize()
-        except Exception as exc:  # noqa: BLE001 - a failed candidate must not kill the caller
+        except Exception as exc:
             logger.debug("solver for %s failed", problem.robot.name, exc_info=True)
             self._finish("failed", f"{type(exc).__name__}: {exc}")
             return
@@ -220,11 +237,18 @@ class ShootingSolver:
         elif not np.all(np.isfinite(result.x)):
             self._finish("failed", "non-finite decision variables", result)
         elif result.status == 0:
-            self._finish("failed", f"iteration limit ({self.max_iterations}) reached, constraint "
-                                   f"violation {violation:.2g}", result, limit_reached=True)
+            self._finish(
+                "failed",
+                f"iteration limit ({self.max_iterations}) reached, constraint violation {violation:.2g}",
+                result,
+                limit_reached=True,
+            )
         elif violation > self.constraint_tolerance:
-            self._finish("failed", f"infeasible: the solver stopped ({result.message}) with constraint "
-                                   f"violation {violation:.2g}", result)
+            self._finish(
+                "failed",
+                f"infeasible: the solver stopped ({result.message}) with constraint violation {violation:.2g}",
+                result,
+            )
         else:
             self._finish("optimal", str(result.message), result)
 
@@ -233,9 +257,15 @@ class ShootingSolver:
         final = self.last
         if result is not None and (final is None or final.iteration != self.iteration_offset + result.nit):
             y = np.array(result.x, dtype=float)
-            final = Iterate(self.iteration_offset + int(result.nit), float(result.fun) * self.problem.cost_unit,
-                            float(result.constr_violation), float(y[0] * self.problem.variable_scale[0]), y,
-                            float(result.optimality), cost_bound=self.problem.cost_bound)
+            final = Iterate(
+                self.iteration_offset + int(result.nit),
+                float(result.fun) * self.problem.cost_unit,
+                float(result.constr_violation),
+                float(y[0] * self.problem.variable_scale[0]),
+                y,
+                float(result.optimality),
+                cost_bound=self.problem.cost_bound,
+            )
         iterations = final.iteration - self.iteration_offset if final is not None else 0
         self._to_caller.put(SolverOutcome(status, reason, iterations, self._seconds, final, limit_reached))
 
@@ -245,6 +275,7 @@ class ShootingSolver:
         n = problem.n_variables
         zero = sparse.csr_matrix((n, n))
         objective_hessian = (lambda y: zero) if exact and problem.cost_name == "time" else SR1()
+
         # With exact Jacobians every point is evaluated with its derivatives at once: trust-constr
         # asks for them at nearly every point whose values it asked for, and a second pass would
         # redo the propagation and every FCL query (measured on 4 paper-5kg candidates: 32-35 ms
@@ -253,10 +284,20 @@ class ShootingSolver:
             return problem.evaluate(y, derivatives=exact)
 
         constraint = NonlinearConstraint(
-            lambda y: evaluate(y).constraints, problem.constraint_lower, problem.constraint_upper,
-            jac=problem.constraint_jacobian if exact else "2-point", hess=SR1())
-        options = {"maxiter": self.max_iterations, "gtol": self.tolerance, "xtol": self.tolerance,
-                   "barrier_tol": self.tolerance, "sparse_jacobian": True, "verbose": 0}
+            lambda y: evaluate(y).constraints,
+            problem.constraint_lower,
+            problem.constraint_upper,
+            jac=problem.constraint_jacobian if exact else "2-point",
+            hess=SR1(),
+        )
+        options = {
+            "maxiter": self.max_iterations,
+            "gtol": self.tolerance,
+            "xtol": self.tolerance,
+            "barrier_tol": self.tolerance,
+            "sparse_jacobian": True,
+            "verbose": 0,
+        }
         if self.warm:
             # Start close to the given point: with the defaults (radius 1, barrier 0.1) a refined
             # re-solve first wandered to 3x its final tf (76 iterations); with these, 19.
@@ -264,7 +305,9 @@ class ShootingSolver:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # delta_grad == 0 and similar SR1 notes
             return minimize(
-                lambda y: evaluate(y).cost, self.y0, method="trust-constr",
+                lambda y: evaluate(y).cost,
+                self.y0,
+                method="trust-constr",
                 jac=problem.cost_gradient if exact else "2-point",
                 hess=objective_hessian,
                 bounds=Bounds(problem.variable_lower, problem.variable_upper),

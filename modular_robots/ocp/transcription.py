@@ -49,16 +49,23 @@ class Transcription:
     #: nodes hold everywhere and the sub-steps need none.
     velocity_linear_in_time: bool = False
 
-    def propagate(self, robot: RobotModel, x0: np.ndarray, u: np.ndarray, tf: float,
-                  intervals: int, substeps: int, derivatives: bool) -> Propagation:
+    def propagate(
+        self,
+        robot: RobotModel,
+        x0: np.ndarray,
+        u: np.ndarray,
+        tf: float,
+        intervals: int,
+        substeps: int,
+        derivatives: bool,
+    ) -> Propagation:
         raise NotImplementedError
 
     def control_scale(self, robot: RobotModel, tf: float, intervals: int) -> np.ndarray:
         """Characteristic control magnitude, used to scale the decision variables."""
         raise NotImplementedError
 
-    def initial_controls(self, robot: RobotModel, q: np.ndarray, v: np.ndarray,
-                         a: np.ndarray) -> np.ndarray:
+    def initial_controls(self, robot: RobotModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Controls ``(N, nv)`` that realise node accelerations ``a`` from node states ``(q, v)``."""
         raise NotImplementedError
 
@@ -118,7 +125,7 @@ class ForwardDynamics(Transcription):
         torque_sens = None
         if derivatives:
             torque_sens = np.zeros((n_int, substeps + 1, nv, p))
-            torque_sens[:, :, :, n:n + nv] = np.eye(nv)
+            torque_sens[:, :, :, n : n + nv] = np.eye(nv)
         return Propagation(states, torques, sens, torque_sens)
 
     @staticmethod
@@ -143,7 +150,7 @@ class ForwardDynamics(Transcription):
         K = np.empty_like(X)
         K[:, :nv] = X[:, nv:]
         K[:, nv:] = dq @ X[:, :nv] + dv @ X[:, nv:]
-        K[:, nv:, n:n + nv] += minv
+        K[:, nv:, n : n + nv] += minv
         return xdot, K
 
 
@@ -195,10 +202,10 @@ class InverseDynamics(Transcription):
         sens = np.zeros((n_int, substeps + 1, n, p))
         sens[:, :, :nv, :nv] = eye
         sens[:, :, :nv, nv:n] = s[None, :, None, None] * eye
-        sens[:, :, :nv, n:n + nv] = 0.5 * (s**2)[None, :, None, None] * eye
+        sens[:, :, :nv, n : n + nv] = 0.5 * (s**2)[None, :, None, None] * eye
         sens[:, :, :nv, -1] = v * frac[None, :, None]
         sens[:, :, nv:, nv:n] = eye
-        sens[:, :, nv:, n:n + nv] = s[None, :, None, None] * eye
+        sens[:, :, nv:, n : n + nv] = s[None, :, None, None] * eye
         sens[:, :, nv:, -1] = a * frac[None, :, None]
         dq = np.empty((n_int, substeps + 1, nv, nv))
         dv = np.empty_like(dq)
@@ -209,7 +216,7 @@ class InverseDynamics(Transcription):
                 mass[i, j] = np.triu(m) + np.triu(m, 1).T
                 torques[i, j] = data.tau
         torque_sens = dq @ sens[:, :, :nv] + dv @ sens[:, :, nv:]
-        torque_sens[:, :, :, n:n + nv] += mass
+        torque_sens[:, :, :, n : n + nv] += mass
         return Propagation(states, torques, sens, torque_sens)
 
 

@@ -71,8 +71,11 @@ class Verification:
 
     @property
     def limits_ok(self) -> bool:
-        return (self.position_excess <= LIMIT_TOLERANCE and self.velocity_ratio <= 1.0 + LIMIT_TOLERANCE
-                and self.torque_ratio <= 1.0 + LIMIT_TOLERANCE)
+        return (
+            self.position_excess <= LIMIT_TOLERANCE
+            and self.velocity_ratio <= 1.0 + LIMIT_TOLERANCE
+            and self.torque_ratio <= 1.0 + LIMIT_TOLERANCE
+        )
 
     @property
     def clearance_ok(self) -> bool:
@@ -109,8 +112,13 @@ class Trajectory:
 
     def header(self) -> list[str]:
         nv = self.q.shape[1]
-        return (["t"] + [f"q{i}" for i in range(1, nv + 1)] + [f"qd{i}" for i in range(1, nv + 1)]
-                + [f"tau{i}" for i in range(1, nv + 1)] + ["x", "y", "z"])
+        return (
+            ["t"]
+            + [f"q{i}" for i in range(1, nv + 1)]
+            + [f"qd{i}" for i in range(1, nv + 1)]
+            + [f"tau{i}" for i in range(1, nv + 1)]
+            + ["x", "y", "z"]
+        )
 
     def table(self) -> np.ndarray:
         return np.column_stack([self.t, self.q, self.qd, self.tau, self.tool])
@@ -129,8 +137,9 @@ def sample_trajectory(problem: ShootingProblem, y: np.ndarray) -> Trajectory:
     tau = np.vstack([prop.torques[:, :S].reshape(-1, nv), prop.torques[-1, S]])
     t = np.linspace(0.0, tf, N * S + 1)
     tool = np.array([problem.robot.tool_position(x[:nv]) for x in states])
-    return Trajectory(t, states[:, :nv], states[:, nv:], tau, tool, problem.robot.velocity_limit,
-                      problem.robot.effort_limit)
+    return Trajectory(
+        t, states[:, :nv], states[:, nv:], tau, tool, problem.robot.velocity_limit, problem.robot.effort_limit
+    )
 
 
 def _dynamics(problem: ShootingProblem, node: np.ndarray, u: np.ndarray):
@@ -145,8 +154,9 @@ def _dynamics(problem: ShootingProblem, node: np.ndarray, u: np.ndarray):
     return rhs
 
 
-def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
-           rtol: float = 1e-10, atol: float = 1e-10) -> Verification:
+def verify(
+    problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8, rtol: float = 1e-10, atol: float = 1e-10
+) -> Verification:
     """Re-integrate the solution ``y`` of ``problem`` adaptively and measure it (module docstring)."""
     robot, tr = problem.robot, problem.transcription
     tf, nodes, controls = problem.unpack(y)
@@ -155,19 +165,21 @@ def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
     defect, points = 0.0, 0
     clearance, pos_excess, vel_ratio, tau_ratio = np.inf, 0.0, 0.0, 0.0
     vmax, tmax = robot.velocity_limit, robot.effort_limit
-    span = np.where(np.isfinite(robot.upper - robot.lower) & (robot.upper > robot.lower),
-                    robot.upper - robot.lower, 1.0)
+    span = np.where(
+        np.isfinite(robot.upper - robot.lower) & (robot.upper > robot.lower), robot.upper - robot.lower, 1.0
+    )
     planned = problem.transcription.propagate(robot, nodes[:-1], controls, tf, N, S, False).states
     for m in range(N):
         node, u = nodes[m], controls[m]
         rhs = _dynamics(problem, node, u)
         gap = 0.0
         for j in range(S):
-            sol = solve_ivp(rhs, (j * hs, (j + 1) * hs), planned[m, j], method="DOP853", rtol=rtol, atol=atol,
-                            dense_output=True)
+            sol = solve_ivp(
+                rhs, (j * hs, (j + 1) * hs), planned[m, j], method="DOP853", rtol=rtol, atol=atol, dense_output=True
+            )
             if not sol.success:
                 return Verification(np.inf, np.inf, np.inf, -np.inf, np.inf, np.inf, np.inf, 0, S)
-            grid = np.linspace(j * hs, (j + 1) * hs, points_per_substep + 1)[:-1 if j < S - 1 else None]
+            grid = np.linspace(j * hs, (j + 1) * hs, points_per_substep + 1)[: -1 if j < S - 1 else None]
             states = sol.sol(grid).T
             for s, state in zip(grid, states):
                 q, v = state[:nv], state[nv:]
@@ -181,9 +193,16 @@ def verify(problem: ShootingProblem, y: np.ndarray, points_per_substep: int = 8,
             x = sol.y[:, -1]
             gap += np.abs(x - (planned[m, j + 1] if j < S - 1 else nodes[m + 1])) / problem.x_scale
         defect = max(defect, float(np.max(gap)))
-    last = solve_ivp(_dynamics(problem, nodes[N - 1], controls[N - 1]), (0.0, S * hs), nodes[N - 1],
-                     method="DOP853", rtol=rtol, atol=atol)
+    last = solve_ivp(
+        _dynamics(problem, nodes[N - 1], controls[N - 1]),
+        (0.0, S * hs),
+        nodes[N - 1],
+        method="DOP853",
+        rtol=rtol,
+        atol=atol,
+    )
     x = last.y[:, -1] if last.success else np.full(2 * nv, np.inf)
     error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(problem.q_goal)))
-    return Verification(error, float(np.max(np.abs(x[nv:]))), defect, clearance, max(pos_excess, 0.0),
-                        vel_ratio, tau_ratio, points, S)
+    return Verification(
+        error, float(np.max(np.abs(x[nv:]))), defect, clearance, max(pos_excess, 0.0), vel_ratio, tau_ratio, points, S
+    )
