@@ -105,7 +105,7 @@ def _lm_step(jacobian: np.ndarray, error_vector: np.ndarray, error: float) -> np
 
     The symmetric positive definite 3 x 3 system is solved by Cramer's rule on scalars: this
     loop runs millions of times in step B and numpy's general solver costs more than the
-    arithmetic (``tests/test_ik.py`` checks it against ``numpy.linalg.solve``).
+    arithmetic (``tests/test_feasibility.py`` checks it against the plain normal equations).
     """
     damping = 0.5 * error * error + 1e-4
     (a, b, c), (_, d, e), (_, _, f) = (jacobian @ jacobian.T).tolist()

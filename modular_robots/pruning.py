@@ -15,8 +15,7 @@ only: a candidate that has converged (its verified cost), or a live one whose co
 violation is at most ``guard_violation``. While no iterate is trusted, nobody is pruned. The
 same holds for the other side of the comparison: a candidate is pruned only on a trusted cost of
 its own, because trust-constr typically lengthens ``tf`` while it restores feasibility and
-shortens it afterwards (measured on the small test scenario: the eventual winner went from 1.57 s
-to 3.44 s and back to 1.57 s, and the unguarded rule pruned it at 3.44 s). A candidate that has
+shortens it afterwards. A candidate that has
 converged is never pruned. One that is re-solving after a failed verification is judged on the
 optimum of its previous solve, not on its iterates (they are transients of the refinement): for
 the inverse transcription the refined problem keeps every constraint of the coarse one and adds
@@ -31,33 +30,19 @@ feasible.
 Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSettings`:
 
 * **progress** (``window``, ``lookahead``): a trusted cost can still be far from the
-  candidate's optimum. Measured on low-10kg: the brute-force winner is first trusted at 6.7 s
-  (iteration 16) and comes within 1 % of its optimum, 1.02 s, only at iteration 209; the bare
-  rule prunes it on a trusted cost at any threshold up to 1.5. So a candidate is judged only
-  when it was already trusted ``window`` iterations ago, and it is kept while the fall of its cost over that window,
-  repeated ``lookahead`` more times, would bring it back within the threshold: a candidate far
-  above the reference needs a steep fall to be kept, one just above it a gentle one. The
-  defaults (an 8-iteration window, 2 more: 16 iterations ahead) were chosen by replaying
-  brute-force runs of paper-5kg and of low-10kg through this manager on two sets of histories:
-  those of the commit that first set a window (swept over windows 3-20 and lookaheads 0-3; it
-  chose 6 and 3) and those after the solver changes of the next session, which move every
-  candidate's path (swept over windows 3-12 and lookaheads 1-3). trust-constr's progress is
-  bursty, so the boundary moves: on the second set (6, 3) prunes the low-10kg winner at
-  iteration 45 (cost 4.14 s, falling 0.6 s over the window; the next iteration it was at
-  3.16 s, and it ends at 1.02 s), and so does every window below 7, and a lookahead of 1 with
-  windows 7-9. (8, 2) sits inside the region that keeps both
-  winners on both sets, with every neighbour (windows 7-9, lookaheads 1.5-2.5) keeping them
-  too; it saves 3.04x and 2.99x iterations on the two paper-5kg replays, against 3.12x and
-  3.15x for (6, 3).
+  candidate's optimum (on low-10kg the brute-force winner is first trusted at 6.6 times its
+  final cost). So a candidate is judged only when it was already trusted ``window`` iterations
+  ago, and it is kept while the fall of its cost over that window, repeated ``lookahead`` more
+  times, would bring it back within the threshold: a candidate far above the reference needs a
+  steep fall to be kept, one just above it a gentle one. How the defaults (8, 2) were chosen, on
+  replays of brute-force histories, is in ``docs/design-notes.md``.
 * **patience**: a candidate whose iterates are never trusted is never judged by the ratio, and
   such candidates mostly end at the iteration limit. Once a reference exists, a candidate that
-  has not been trusted for ``patience`` iterations in a row is pruned (measured: every candidate
-  that converged on paper-5kg and low-10kg was first trusted by iteration 49, but one at 358, at
-  1.96 times the winner's cost).
+  has not been trusted for ``patience`` iterations in a row is pruned.
 
-Where the candidates run is an :class:`Executor`'s business (this process, or worker processes
-that each host several candidates and advance them on command), so the lockstep and the pruning
-decisions do not depend on the number of workers.
+Where the candidates run is :mod:`~modular_robots.execution`'s business (this process, or worker
+processes that each host several candidates and advance them on command); the manager only
+decides, so its decisions do not depend on the number of workers.
 """
 
 from __future__ import annotations
@@ -257,8 +242,8 @@ class PruningManager:
         if self.settings.rule == "none":
             return []
         # A candidate re-solving with refined sub-steps starts from an optimum that failed
-        # verification; its cost jumps while the new sub-step constraints are restored (measured:
-        # 2.13 s -> 11.5 s -> 2.14 s), so it is judged on that optimum and is no reference.
+        # verification; its cost jumps while the new sub-step constraints are restored, so it is
+        # judged on that optimum and is no reference.
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
         floors = {
             n: max(self.last[n].cost_bound, self.floor.get(n, 0.0) if self.last[n].refinement > 0 else 0.0)

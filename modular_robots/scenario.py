@@ -63,7 +63,7 @@ class PruningSettings:
     when it was trusted ``window`` iterations ago too, and kept while the fall of its cost over
     the window, repeated ``lookahead`` times, would bring it within the threshold (``window = 0``
     turns this off); one not trusted for ``patience`` iterations in a row is pruned once there is
-    a reference (``0`` turns this off). Defaults chosen on replays of brute-force runs (README).
+    a reference (``0`` turns this off). Defaults chosen on replays of brute-force runs (``docs/design-notes.md``).
     """
 
     rule: str = "ratio"

@@ -165,8 +165,8 @@ class Candidate:
         How many times the sub-steps may be doubled after a failed verification. Refinement
         removes sampling errors (what a limit or the clearance does between sub-steps shrinks with
         the sub-step squared); a clearance deficit that one refinement did not halve is a link
-        crossing an obstacle between two clear sub-steps, which no refinement removes (measured on
-        paper-5kg: -0.12 m at 4, 8 and 16 sub-steps), so refinement stops there.
+        crossing an obstacle between two clear sub-steps, which no refinement removes, so
+        refinement stops there.
     jacobian
         ``exact`` or ``finite-difference`` (see :class:`~modular_robots.ocp.solver.ShootingSolver`).
     composition, boundary_pair
@@ -175,8 +175,7 @@ class Candidate:
         When a solve stops at the iteration limit, solve once more from where it stopped, with a
         fresh solver. Near some optima the SR1 approximation degenerates and trust-constr crawls
         (one conjugate-gradient step per iteration, ended by negative curvature or the trust
-        region); measured on two paper-5kg candidates stopped at 300 iterations while feasible, a
-        restart converged in 30 and 73 iterations.
+        region), and a fresh solver gets out of it.
     swing
         When the first solve fails (after its restart), solve once more, cold, from
         :func:`~modular_robots.ocp.guess.swing_path`'s guess, if it gives one: it made the two

@@ -10,32 +10,17 @@ controls are torques, else at every sub-step). Jacobians are exact and assembled
 
 When the velocity is linear in time within an interval (the inverse transcription), every
 sub-step's velocity lies between the two node velocities, so the node bounds already hold it and
-the sub-steps carry no velocity rows: the same feasible set with a sixth fewer inequalities
-(for a 5-DOF paper-5kg candidate, 1016 instead of 1226, each with a slack in trust-constr's
-barrier problem). Measured on the 95 paper-5kg candidates: median 2.34 s per candidate instead
-of 3.04 s, the same 87 converged.
+the sub-steps carry no velocity rows: the same feasible set with a sixth fewer inequalities.
 
-Between the sub-steps a motion could break a position limit unseen (measured on paper-5kg: a
-prismatic stroke overshooting its end by 0.1-0.2 % of its range). So the position limits are also kept
-at every sub-step's midpoint, on the cubic Hermite interpolant of its end states,
+Between the sub-steps a motion could break a position limit unseen, so the position limits are
+also kept at every sub-step's midpoint, on the cubic Hermite interpolant of its end states,
 ``(q_j + q_{j+1}) / 2 + h (v_j - v_{j+1}) / 8`` (``h`` the sub-step's duration; exact for the
 inverse transcription's parabolas); for a parabola this cuts the largest unseen overshoot from
-``|a| h^2 / 8`` to ``|a| h^2 / 32``, and what remains is for verification to catch. Two
-alternatives were measured and dropped: bounding the Bezier control point ``q_j + v_j h / 2``
-(rigorous, but it capped a short prismatic stroke's speed far below its limit: ``tf`` went from
-4.0 s to 10 s), and keeping the clearance at the midpoints too (twice the FCL queries, and the
-two candidates whose links crossed an obstacle between sub-steps still did, by 0.12 m).
+``|a| h^2 / 8`` to ``|a| h^2 / 32``, and what remains is for verification to catch.
 
-A link can still cross an obstacle between two clear sub-steps. Also measured and dropped: a
-"chord" row per sub-step and obstacle, the clearance of the straight path of the axis point
-closest to the obstacle at the sub-step's start (exact derivatives, and it told the crossing
-plans, at -0.10 m, from the verified ones, at +0.016 m or more). In the solver it cost more than it
-saved: 60 of the 75 paper-5kg survivors converged instead of 64, because the crossing ones then
-stopped infeasible at the sub-step level and others stalled on its kinks. And a swept row per
-quarter sub-step and obstacle, the distance to the surface each link's axis sweeps when its end
-points move on straight lines (exact gradients by the envelope theorem; within 5 mm of the dense
-grid on verified plans): from the crossing plans, warm or cold, no solve became feasible, and on
-converging candidates it cost 2-4 times the time and once a 7 times slower local optimum.
+The clearance is kept at the sub-steps only, so a link can still cross an obstacle between two
+clear sub-steps; verification catches it. The constraints tried against that and dropped
+(midpoint clearance, a "chord" row, a swept-volume row) are in ``docs/design-notes.md``.
 
 The problem is a plain object: it evaluates cost, constraints and their derivatives; solving is
 :mod:`~modular_robots.ocp.solver`'s job.

@@ -76,10 +76,8 @@ class SolverOutcome:
 class ShootingSolver:
     """Solve ``problem`` with ``trust-constr`` (exact sparse Jacobians, SR1 Hessians).
 
-    SR1 rather than damped BFGS for the constraints' Hessian: measured on the 75 paper-5kg
-    survivors, BFGS converged as many (64, not the same ones) with a median of 3.44 s per
-    candidate instead of SR1's 2.45 s, and needed 196 iterations instead of 126 on
-    ``B-J1-L1-J1-L3-J1-L3-J1-L1-E1``.
+    SR1 rather than damped BFGS for the constraints' Hessian: on the paper-5kg survivors BFGS
+    converged as many candidates, more slowly (``docs/design-notes.md``).
 
     Parameters
     ----------
@@ -278,8 +276,7 @@ class ShootingSolver:
 
         # With exact Jacobians every point is evaluated with its derivatives at once: trust-constr
         # asks for them at nearly every point whose values it asked for, and a second pass would
-        # redo the propagation and every FCL query (measured on 4 paper-5kg candidates: 32-35 ms
-        # per iteration instead of 41, the same optima).
+        # redo the propagation and every FCL query.
         def evaluate(y):
             return problem.evaluate(y, derivatives=exact)
 
