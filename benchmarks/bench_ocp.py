@@ -66,9 +66,9 @@ def _converge_chunk(context, chunk):
         result, seconds = _solve(scenario, spec, transcription)
         out.append(
             {
-                "composition": spec.verdict.composition.name,
+                "composition": spec.composition.name,
                 "boundary_pair": spec.boundary_pair,
-                "dof": spec.verdict.composition.dof,
+                "dof": spec.composition.dof,
                 "status": result.status,
                 "seconds": seconds,
                 "iterations": result.iterations,
