@@ -156,11 +156,15 @@ class Fields:
         *,
         minimum: float | None = None,
         exclusive_minimum: float | None = None,
+        maximum: float | None = None,
     ) -> float:
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
             return value
-        return self._check_number(key, value, minimum, exclusive_minimum)
+        value = self._check_number(key, value, minimum, exclusive_minimum)
+        if maximum is not None and value > maximum:
+            raise self.fail(key, f"expected a number <= {maximum:g}, got {value:g}")
+        return value
 
     def integer(self, key: str, default: Any = _MISSING, *, minimum: int | None = None) -> int:
         value = self.raw(key, default)

@@ -17,7 +17,7 @@ from .execution import make_engine
 from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, filter_compositions
 from .ocp.candidate import BoundaryPair
 from .pipeline import optimize_composition, run_scenario, with_pruning
-from .recorder import RESULT
+from .report import RESULT, export_controller_rate
 from .scenario import RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
 
@@ -263,6 +263,19 @@ def run_command(scenario_path: Path, out: Path | None, rule: str | None, thresho
         result = run_scenario(scenario, out, jobs, on_progress=progress)
     click.echo(_run_table(result, scenario))
     click.echo(f"wrote {_written(out)}")
+
+
+@main.command("export")
+@click.argument("results", type=click.Path(exists=True, file_okay=False, path_type=Path), metavar="RESULTS_DIR")
+@click.option(
+    "--rate", type=click.FloatRange(min=1.0, max=1e5), default=1000.0, show_default=True, help="Controller rate [Hz]."
+)
+@_user_errors
+def export_command(results: Path, rate: float) -> None:
+    """Resample the winner of RESULTS_DIR at a controller rate: a CSV under the zero-order-hold
+    contract and a ROS JointTrajectory JSON."""
+    files = export_controller_rate(results, rate)
+    click.echo(f"wrote {files['csv']} and {files['json']}")
 
 
 def _written(out: Path) -> str:

@@ -22,11 +22,13 @@ from .execution import make_engine, make_executor, single_threaded_blas
 from .feasibility import FeasibilitySettings, FeasibilitySummary, Verdict, check_composition, filter_compositions
 from .ocp.candidate import BoundaryPair, CandidateResult, CandidateSpec, CandidateStatus, make_candidate
 from .ocp.solver import Iterate
+from .ocp.tracking import Tracking, track
 from .pruning import Progress, PruningManager
 from .recorder import RunRecorder
+from .robot import robot_from_urdf
 from .scenario import Scenario
 
-__all__ = ["RunResult", "candidate_specs", "optimize_composition", "run_scenario", "with_pruning"]
+__all__ = ["RunResult", "candidate_specs", "optimize_composition", "run_scenario", "track_winner", "with_pruning"]
 
 logger = logging.getLogger(__name__)
 
@@ -142,7 +144,7 @@ def run_scenario(
             reasons = "; ".join(f"{r.name}: {r.reason}" for r in results[:3])
             recorder.finish("failed", f"every candidate failed ({reasons})")
             raise InfeasibleError(f"no candidate converged to a verified trajectory ({reasons})")
-        recorder.record_winner(winner, f"{scenario.name}: rule {scenario.pruning.rule}")
+        recorder.record_winner(winner, f"{scenario.name}: rule {scenario.pruning.rule}", track_winner(winner))
         recorder.finish("done")
         return RunResult(tuple(results), winner, summary, rounds, dict(recorder.seconds))
 
@@ -224,7 +226,7 @@ def optimize_composition(
             reason = "; ".join(f"{r.name}: {r.reason}" for r in results)
             recorder.finish("failed", reason)
             raise InfeasibleError(reason)
-        recorder.record_winner(winner)
+        recorder.record_winner(winner, tracking=track_winner(winner))
         recorder.finish("done")
         return RunResult(tuple(results), winner, summary, 0, dict(recorder.seconds))
 
@@ -234,6 +236,12 @@ def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
     if result.composition:
         return result
     return replace(result, composition=spec.composition.name, boundary_pair=spec.boundary_pair)
+
+
+def track_winner(result: CandidateResult) -> Tracking:
+    """The closed-loop check of an optimal result's plan on its exported URDF and drives
+    (:func:`~modular_robots.ocp.tracking.track`)."""
+    return track(robot_from_urdf(result.urdf, result.drive["armature"]), result.trajectory)
 
 
 def _progress_figures(progress: Progress, total: int) -> dict:

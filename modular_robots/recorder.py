@@ -14,13 +14,16 @@ from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 
+import numpy as np
+
 from .ocp.candidate import CandidateResult
-from .report import atomic_write, write_pruning_plot, write_winner_files
+from .ocp.tracking import Tracking
+from .ocp.trajectory import Trajectory
+from .report import RESULT, atomic_write, write_pruning_plot, write_winner_files
 from .scenario import Scenario
 
 __all__ = ["RunRecorder", "RESULT", "STATUSES"]
 
-RESULT = "result.json"
 #: ``running`` until the run ends; then ``done``, ``infeasible`` (no composition passes step B),
 #: ``failed`` (no candidate verified, or an error), or ``interrupted``.
 STATUSES = ("running", "done", "infeasible", "failed", "interrupted")
@@ -92,9 +95,12 @@ class RunRecorder:
         if time.perf_counter() - self._last_write >= every:
             self._write()
 
-    def record_winner(self, winner: CandidateResult, pruning_plot_title: str | None = None) -> dict:
+    def record_winner(
+        self, winner: CandidateResult, pruning_plot_title: str | None = None, tracking: Tracking | None = None
+    ) -> dict:
         """Write the winner's files (URDF, trajectory, plots) and its block of the document;
-        return the files' names. ``pruning_plot_title``: also plot every candidate's history."""
+        return the files' names. ``pruning_plot_title``: also plot every candidate's history;
+        ``tracking``: the closed-loop check of its plan."""
         files = {}
         if self.path is not None:
             start = time.perf_counter()
@@ -102,7 +108,7 @@ class RunRecorder:
             if pruning_plot_title is not None:
                 files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
             self.seconds["report"] = time.perf_counter() - start
-        self.winner = _winner_json(winner, files)
+        self.winner = _winner_json(winner, files, tracking)
         return files
 
     def finish(self, status: str, message: str = "") -> None:
@@ -139,7 +145,8 @@ class RunRecorder:
             atomic_write(self.path / RESULT, json.dumps(self.document(), indent=1, allow_nan=False) + "\n")
 
 
-def _winner_json(result: CandidateResult, files: dict) -> dict:
+def _winner_json(result: CandidateResult, files: dict, tracking: Tracking | None) -> dict:
+    trajectory = result.trajectory
     return {
         "composition": result.composition or result.name,
         "candidate": result.name,
@@ -151,5 +158,20 @@ def _winner_json(result: CandidateResult, files: dict) -> dict:
         "seconds": round(result.seconds, 4),
         "substeps": result.substeps,
         "verification": result.verification.to_json() if result.verification else None,
+        "limits_used": _limits_used(trajectory) if trajectory is not None else None,
+        "tracking": tracking.to_json() if tracking is not None else None,
+        "drive": result.drive,
         "files": files,
+    }
+
+
+def _limits_used(trajectory: Trajectory) -> dict:
+    """Per joint, the largest share of its effort and velocity limit the plan's rows use."""
+
+    def share(values, limit):
+        return [float(v) for v in np.max(np.abs(values), axis=0) / np.where(limit > 0, limit, np.inf)]
+
+    return {
+        "effort": share(trajectory.tau, trajectory.effort_limit),
+        "velocity": share(trajectory.qd, trajectory.velocity_limit),
     }

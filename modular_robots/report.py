@@ -8,14 +8,17 @@ sees half a file.
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from .exceptions import InputError
 from .ocp.candidate import CandidateResult, CandidateStatus
-from .ocp.verification import Trajectory
+from .ocp.trajectory import Trajectory, controller_rate, joint_trajectory
+from .robot import robot_from_urdf
 
 __all__ = [
     "atomic_write",
@@ -29,6 +32,7 @@ __all__ = [
     "PRUNING_PLOT",
 ]
 
+RESULT = "result.json"
 URDF = "winner.urdf"
 TRAJECTORY = "trajectory.csv"
 JOINTS_PLOT = "joints.png"
@@ -67,6 +71,41 @@ def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -
     return files
 
 
+def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str, Path]:
+    """Resample the winner of the results folder ``folder`` at a controller ``rate`` [Hz].
+
+    The plan is read from ``trajectory.csv``, whose acceleration contract defines the motion
+    exactly between its rows, so the new rows are the plan's own values, not an interpolation;
+    torques come from the inverse dynamics of ``winner.urdf`` with the drives of ``result.json``
+    (:func:`~modular_robots.ocp.trajectory.controller_rate`). Writes
+    ``trajectory_<rate>hz.csv`` (no ``qdd`` columns: the zero-order-hold contract of SPEC §7) and
+    ``trajectory.json`` (ROS ``trajectory_msgs/JointTrajectory``); returns their paths.
+
+    Raises
+    ------
+    InputError
+        If the folder has no winner to export.
+    """
+    folder = Path(folder)
+    try:
+        document = json.loads((folder / RESULT).read_text())
+        winner = document["winner"]
+        files = winner["files"]
+        urdf = (folder / files["urdf"]).read_text()
+        trajectory = Trajectory.read_csv(folder / files["trajectory"])
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{folder}: no exported winner to resample ({exc})") from None
+    robot = robot_from_urdf(urdf, (winner.get("drive") or {}).get("armature"))
+    resampled = controller_rate(trajectory, robot, rate)
+    csv_path = folder / f"trajectory_{rate:g}hz.csv"
+    tmp = csv_path.with_name(f".{csv_path.name}.tmp")
+    resampled.write_csv(tmp, accelerations=False)
+    os.replace(tmp, csv_path)
+    json_path = folder / "trajectory.json"
+    atomic_write(json_path, json.dumps(joint_trajectory(resampled, robot.joint_names)) + "\n")
+    return {"csv": csv_path, "json": json_path}
+
+
 def write_pruning_plot(folder: Path, results: Sequence[CandidateResult], winner: str | None, title: str = "") -> str:
     """Plot every candidate's cost history into ``folder``; return the file's name."""
     plot_pruning_history(results, winner, Path(folder) / PRUNING_PLOT, title)
@@ -82,26 +121,29 @@ def _figure(**kwargs):
 
 
 def plot_joints(trajectory: Trajectory, path: Path, title: str = "") -> None:
-    """The paper's Fig. 4: joint positions, velocities and torques over time, limits dashed."""
-    fig = _figure(figsize=(8, 8))
-    axes = fig.subplots(3, 1, sharex=True)
+    """The paper's Fig. 4, with what a controller needs: joint positions, velocities,
+    accelerations (constant between rows: the file's contract) and torques over time; limits
+    dashed, the bounds the plan kept (limits times the margins) dotted."""
+    fig = _figure(figsize=(8, 10))
+    axes = fig.subplots(4, 1, sharex=True)
     rows = (
-        (trajectory.q, "position [rad | m]", None),
-        (trajectory.qd, "velocity [rad/s | m/s]", trajectory.velocity_limit),
-        (trajectory.tau, "torque [N m | N]", trajectory.effort_limit),
+        (trajectory.q, "position [rad | m]", None, None, "default"),
+        (trajectory.qd, "velocity [rad/s | m/s]", trajectory.velocity_limit, trajectory.velocity_bound, "default"),
+        (trajectory.qdd, "acceleration [rad/s² | m/s²]", None, None, "steps-post"),
+        (trajectory.tau, "torque [N m | N]", trajectory.effort_limit, trajectory.effort_bound, "default"),
     )
-    for ax, (values, label, limit) in zip(axes, rows):
+    for ax, (values, label, limit, bound, drawstyle) in zip(axes, rows):
         for i in range(values.shape[1]):
-            drawstyle = "steps-post" if values is trajectory.tau else "default"
             (line,) = ax.plot(trajectory.t, values[:, i], label=f"joint {i + 1}", drawstyle=drawstyle)
-            if limit is not None and np.isfinite(limit[i]):
-                ax.axhline(limit[i], color=line.get_color(), ls="--", lw=0.6)
-                ax.axhline(-limit[i], color=line.get_color(), ls="--", lw=0.6)
+            for level, style in ((limit, "--"), (bound, ":")):
+                if level is not None and np.isfinite(level[i]) and (style == "--" or level[i] != limit[i]):
+                    ax.axhline(level[i], color=line.get_color(), ls=style, lw=0.7)
+                    ax.axhline(-level[i], color=line.get_color(), ls=style, lw=0.7)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    axes[0].legend(ncol=min(values.shape[1], 6), fontsize=8, loc="best")
+    axes[0].legend(ncol=min(trajectory.nv, 6), fontsize=8, loc="best")
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle(f"{title}  (tf = {trajectory.t[-1]:.3f} s)")
+    fig.suptitle(f"{title}  (tf = {trajectory.t[-1]:.3f} s; limits dashed, planned bounds dotted)")
     fig.tight_layout()
     _save(fig, path)
 

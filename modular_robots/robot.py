@@ -18,7 +18,7 @@ from .catalog import Catalog
 from .composition import Composition
 from .urdf import PAYLOAD_RADIUS, composition_urdf, link_name
 
-__all__ = ["Primitive", "RobotModel", "robot_model"]
+__all__ = ["Primitive", "RobotModel", "robot_from_urdf", "robot_model"]
 
 
 @dataclass(frozen=True)
@@ -122,6 +122,24 @@ class RobotModel:
     def moving_primitives(self) -> tuple[int, ...]:
         """Indices of the primitives that move with some joint (the others never change pose)."""
         return tuple(i for i, fid in enumerate(self._primitive_frames) if self.model.frames[fid].parentJoint != 0)
+
+    @property
+    def joint_names(self) -> list[str]:
+        """The movable joints' names, in the order of ``q`` (``joint_1 .. joint_n`` for compositions)."""
+        return [str(name) for name in self.model.names[1:]]
+
+    def drive(self) -> dict:
+        """What the URDF cannot say about the drives, per joint in ``q`` order: ``armature``
+        (reflected rotor inertia [kg m^2 | kg]) and Coulomb and viscous friction (none is modelled
+        yet, so 0); ``trajectory.csv``'s torques include them."""
+        nv = self.nv
+        return {
+            "joints": self.joint_names,
+            "armature": [float(a) for a in self.model.armature],
+            "coulomb": [0.0] * nv,
+            "viscous": [0.0] * nv,
+            "coulomb_smoothing": None,
+        }
 
     # -- kinematics -----------------------------------------------------------------------
     def tool_position(self, q: np.ndarray) -> np.ndarray:
@@ -231,3 +249,13 @@ def _pinocchio_model(composition: Composition, catalog: Catalog, payload: float)
     joint_modules = [catalog.module(m) for m in composition.modules if catalog.module(m).dof]
     model.armature = np.array([m.armature for m in joint_modules], dtype=float)
     return model, urdf
+
+
+def robot_from_urdf(urdf: str, armature=None, tool_frame: str = "tool0", name: str = "") -> RobotModel:
+    """A :class:`RobotModel` (no collision primitives) of a URDF text, e.g. an exported
+    ``winner.urdf``, with the drives' ``armature`` (URDF has no field for it; ``result.json``'s
+    ``winner.drive`` has it)."""
+    model = pin.buildModelFromXML(urdf)
+    if armature is not None:
+        model.armature = np.asarray(armature, dtype=float)
+    return RobotModel(model, tool_frame, (), name, urdf)

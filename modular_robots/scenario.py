@@ -43,7 +43,12 @@ class OptimizerSettings:
     """Step C settings: shooting nodes (intervals = nodes - 1), integration sub-steps per interval,
     trust-constr iteration limit and tolerances, the transcription, and the clearance [m] kept
     from obstacles at the sub-steps (so that the motion between two sub-steps, which is not
-    checked by the solver, stays clear; verification checks it on a dense grid)."""
+    checked by the solver, stays clear; verification checks it on a dense grid).
+
+    ``effort_margin`` and ``velocity_margin`` (fractions in (0, 1]) are the share of each joint's
+    effort and velocity limit the plan may use: the rest is headroom for a feedback controller
+    that tracks it. Verification and the exported URDF keep the catalogue's full limits.
+    """
 
     nodes: int = 8
     substeps: int = 4
@@ -52,6 +57,8 @@ class OptimizerSettings:
     constraint_tolerance: float = 1e-6
     transcription: str = "inverse"
     clearance_margin: float = 0.02
+    effort_margin: float = 0.9
+    velocity_margin: float = 0.95
 
 
 @dataclass(frozen=True)
@@ -155,6 +162,8 @@ def _read_optimizer(f: Fields | None) -> OptimizerSettings:
         constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance, exclusive_minimum=0.0),
         transcription=f.string("transcription", default=d.transcription, choices=TRANSCRIPTIONS),
         clearance_margin=f.number("clearance_margin", default=d.clearance_margin, minimum=0.0),
+        effort_margin=f.number("effort_margin", default=d.effort_margin, exclusive_minimum=0.0, maximum=1.0),
+        velocity_margin=f.number("velocity_margin", default=d.velocity_margin, exclusive_minimum=0.0, maximum=1.0),
     )
     f.done()
     return settings

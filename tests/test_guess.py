@@ -100,7 +100,10 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
     """From the straight line the solve fails; the candidate then solves from the swing guess,
     and the plan, re-integrated open loop with the hand-written dynamics, overshoots the goal,
     comes back and stops there within the torque limit."""
-    settings = OptimizerSettings(transcription=transcription, max_iterations=100)
+    # the goal is held at 99.9 % of the limit: plan at the full limits (no headroom)
+    settings = OptimizerSettings(
+        transcription=transcription, max_iterations=100, effort_margin=1.0, velocity_margin=1.0
+    )
     problem = ShootingProblem(pendulum(), [Q_START], [Q_GOAL], settings=settings)
     straight = Candidate(problem, swing=False).solve()
     assert straight.status == "failed" and "iteration limit" in straight.reason
@@ -114,7 +117,8 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
     intervals = swung.intervals
     # the result carries its own plan, sampled on the swing's problem: to tf, past the goal and back
     assert result.trajectory.t[-1] == pytest.approx(tf, rel=1e-12)
-    assert result.trajectory.q[-1, 0] == pytest.approx(Q_GOAL, abs=1e-9)
+    # the rows chain from the start, so they end at the goal within the solver's continuity gaps
+    assert result.trajectory.q[-1, 0] == pytest.approx(Q_GOAL, abs=1e-4)
     assert result.trajectory.q[:, 0].max() > Q_GOAL + 0.05
     inertia = MASS * ARM**2 + I_OWN
     if transcription == "forward":
@@ -146,7 +150,12 @@ def test_the_goal_held_at_the_torque_edge_is_reached_from_the_swing_guess(transc
 def test_a_candidate_closed_during_its_swing_solve_records_the_swing_problem(tmp_path):
     """``y`` is scaled by the initial guess's ``tf``, so a result taken mid-swing must carry the
     swing's waypoints; a stopped result has no trajectory, and exporting one is refused."""
-    problem = ShootingProblem(pendulum(), [Q_START], [Q_GOAL], settings=OptimizerSettings(max_iterations=100))
+    problem = ShootingProblem(
+        pendulum(),
+        [Q_START],
+        [Q_GOAL],
+        settings=OptimizerSettings(max_iterations=100, effort_margin=1.0, velocity_margin=1.0),
+    )
     candidate = Candidate(problem)
     swinging = 0
     for _ in candidate.iterate():

@@ -39,7 +39,8 @@ from modular_robots.feasibility import check_composition
 from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem, make_candidate
 from modular_robots.ocp.shooting import NonFiniteError, ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
-from modular_robots.ocp.verification import Verification, sample_trajectory, verify
+from modular_robots.ocp.trajectory import sample_trajectory
+from modular_robots.ocp.verification import Verification, verify
 from modular_robots.pipeline import candidate_specs, optimize_composition
 from modular_robots.robot import Primitive, RobotModel
 from modular_robots.scenario import OptimizerSettings, SphereObstacle, load_scenario
@@ -344,13 +345,41 @@ ROTOR_CASES = {
 }
 
 
+#: Plan at the full limits (no headroom), as the analytic optima assume.
+FULL_LIMITS = {"effort_margin": 1.0, "velocity_margin": 1.0}
+
+
+@pytest.mark.parametrize("transcription", ["inverse", "forward"])
+@pytest.mark.parametrize(("effort_margin", "velocity_margin"), [(0.9, 0.95), (0.6, 0.8)])
+def test_the_margins_give_the_optimum_of_the_reduced_limits(transcription, effort_margin, velocity_margin):
+    """The trapezoid optimum within margins is the analytic one of a rotor whose limits are the
+    margins times its own, ``dq / v + v I / tau``; the plan keeps those bounds, and verification
+    (at the full limits) passes it with the headroom left."""
+    settings = OptimizerSettings(
+        nodes=9, substeps=2, transcription=transcription, effort_margin=effort_margin, velocity_margin=velocity_margin
+    )
+    problem = ShootingProblem(rotor(I_ROTOR, TAU_ROTOR, V_TRAP), [-0.5], [-0.5 + DQ_TRAP], settings=settings)
+    outcome = ShootingSolver(problem).solve()
+    assert outcome.status == "optimal", outcome.reason
+    v, tau = velocity_margin * V_TRAP, effort_margin * TAU_ROTOR
+    assert outcome.final.tf == pytest.approx(DQ_TRAP / v + v * I_ROTOR / tau, rel=0.01)
+    trajectory = sample_trajectory(problem, outcome.final.y)
+    assert np.abs(trajectory.qd).max() <= v * (1.0 + 1e-4)
+    assert np.abs(trajectory.tau).max() == pytest.approx(tau, rel=0.02)
+    check = verify(problem, outcome.final.y)
+    assert check.passed and check.torque_ratio <= effort_margin * (1.0 + 1e-3)
+
+
 @pytest.mark.parametrize("transcription", TRANSCRIPTIONS)
 @pytest.mark.parametrize("case", list(ROTOR_CASES))
 def test_rotor_reaches_the_analytic_minimum_time(case, transcription):
     v_max, dq, nodes, expected = ROTOR_CASES[case]
     robot = rotor(I_ROTOR, TAU_ROTOR, v_max)
     problem = ShootingProblem(
-        robot, [-0.5], [-0.5 + dq], settings=OptimizerSettings(nodes=nodes, substeps=2, transcription=transcription)
+        robot,
+        [-0.5],
+        [-0.5 + dq],
+        settings=OptimizerSettings(nodes=nodes, substeps=2, transcription=transcription, **FULL_LIMITS),
     )
     outcome = ShootingSolver(problem).solve()
     assert outcome.status == "optimal", outcome.reason
@@ -373,6 +402,7 @@ def test_rotor_reaches_the_analytic_minimum_time(case, transcription):
     assert np.abs(trajectory.qd).max() <= v_max * (1.0 + 1e-5)
     accelerating = trajectory.t < 0.5 * tf - 1e-9
     braking = trajectory.t > 0.5 * tf + 1e-9
+    braking[-1] = False  # from tf on the rotor rests (the row at tf holds qdd = 0)
     if case == "bang-bang":
         # bang-bang: full torque forward, then full torque back; peak speed at tf / 2
         assert np.all(trajectory.tau[accelerating] > 0.97 * TAU_ROTOR)
@@ -603,7 +633,7 @@ def test_a_candidate_stopped_at_the_iteration_limit_restarts_once_from_where_it_
     """A 12-iteration limit stops the rotor's solve early (it needs 20). The restart continues
     from the last iterate (iteration numbers and the cost run on), once: it ends at the limit
     again, but within 0.1 % of the analytic optimum and nearly feasible."""
-    settings = OptimizerSettings(nodes=9, substeps=2, transcription="inverse", max_iterations=12)
+    settings = OptimizerSettings(nodes=9, substeps=2, transcription="inverse", max_iterations=12, **FULL_LIMITS)
     problem = ShootingProblem(rotor(I_ROTOR, TAU_ROTOR, V_TRAP), [-0.5], [-0.5 + DQ_TRAP], settings=settings)
     first = ShootingSolver(problem).solve()
     assert first.limit_reached and first.iterations == 12

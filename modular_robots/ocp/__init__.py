@@ -20,7 +20,8 @@ from .candidate import (
 )
 from .shooting import NonFiniteError, ShootingProblem
 from .solver import Iterate, ShootingSolver, SolverOutcome
-from .verification import Trajectory, Verification, sample_trajectory, verify
+from .trajectory import Trajectory, controller_rate, sample_trajectory
+from .verification import Verification, verify
 
 __all__ = [
     "BoundaryPair",
@@ -36,6 +37,7 @@ __all__ = [
     "Trajectory",
     "Verification",
     "composition_problem",
+    "controller_rate",
     "make_candidate",
     "sample_trajectory",
     "verify",

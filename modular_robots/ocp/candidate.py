@@ -25,7 +25,8 @@ from ..scenario import OptimizerSettings, Scenario, Task
 from .guess import swing_path
 from .shooting import ShootingProblem
 from .solver import Iterate, ShootingSolver
-from .verification import Trajectory, Verification, sample_trajectory, verify
+from .trajectory import Trajectory, sample_trajectory
+from .verification import Verification, verify
 
 __all__ = [
     "BoundaryPair",
@@ -112,6 +113,8 @@ class CandidateResult:
     waypoints: np.ndarray | None = field(default=None, repr=False, compare=False)
     trajectory: Trajectory | None = field(default=None, repr=False, compare=False)
     urdf: str | None = field(default=None, repr=False, compare=False)
+    #: The drives' armature and friction, which URDF cannot hold (:meth:`RobotModel.drive`).
+    drive: dict | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def never_started(cls, name: str, reason: str = "stopped before it started") -> CandidateResult:
@@ -315,6 +318,7 @@ class Candidate:
             waypoints=problem.waypoints,
             trajectory=sample_trajectory(problem, last.y) if optimal else None,
             urdf=problem.robot.urdf if optimal else None,
+            drive=problem.robot.drive() if optimal else None,
         )
 
 

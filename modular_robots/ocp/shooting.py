@@ -112,6 +112,10 @@ class ShootingProblem:
         self.transcription = transcription(settings.transcription)
         self.intervals = settings.nodes - 1
         self.substeps = int(substeps or settings.substeps)
+        #: The velocity and effort bounds the plan keeps [rad/s | m/s, N m | N]: the robot's limits
+        #: times the settings' margins (verification holds the plan to the full limits).
+        self.velocity_bound = settings.velocity_margin * robot.velocity_limit
+        self.effort_bound = settings.effort_margin * robot.effort_limit
         nv = self.nv = robot.nv
         n = self.nx = 2 * nv
         self.q_start = self._configuration(q_start, "q_start")
@@ -149,7 +153,7 @@ class ShootingProblem:
         self.variable_scale = np.concatenate([[self.tf_guess], np.tile(self.x_scale, N - 1), np.tile(self.u_scale, N)])
         guess_u = self.transcription.initial_controls(robot, guess_nodes[:-1, :nv], guess_nodes[:-1, nv:], guess_acc)
         if self.transcription.controls_are_torques:
-            guess_u = np.clip(guess_u, -robot.effort_limit, robot.effort_limit)
+            guess_u = np.clip(guess_u, -self.effort_bound, self.effort_bound)
         self._guess = self.pack(self.tf_guess, guess_nodes, guess_u)
         self._build_bounds()
         self._build_pattern()
@@ -222,10 +226,10 @@ class ShootingProblem:
     # -- bounds and sparsity -----------------------------------------------------------------
     def _build_bounds(self) -> None:
         robot, N, nv = self.robot, self.intervals, self.nv
-        x_lo = np.concatenate([robot.lower, -robot.velocity_limit])
-        x_hi = np.concatenate([robot.upper, robot.velocity_limit])
+        x_lo = np.concatenate([robot.lower, -self.velocity_bound])
+        x_hi = np.concatenate([robot.upper, self.velocity_bound])
         if self.transcription.controls_are_torques:
-            u_lo, u_hi = -robot.effort_limit, robot.effort_limit
+            u_lo, u_hi = -self.effort_bound, self.effort_bound
         else:
             u_lo, u_hi = np.full(nv, -np.inf), np.full(nv, np.inf)
         lb = np.concatenate([[1e-3 * self.tf_guess], np.tile(x_lo, N - 1), np.tile(u_lo, N)])
@@ -264,7 +268,7 @@ class ShootingProblem:
                 lo, hi = np.full((N, k, r), self.settings.clearance_margin), np.full((N, k, r), np.inf)
                 sc = np.ones((N, k, r))
             else:
-                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.robot.effort_limit, self.robot.effort_limit))
+                lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.effort_bound, self.effort_bound))
                 sc = np.broadcast_to(self.tau_scale, (N, k, r))
             lower.append(np.ravel(lo))
             upper.append(np.ravel(hi))

@@ -28,7 +28,7 @@ from scipy.integrate import solve_ivp
 
 from .shooting import ShootingProblem
 
-__all__ = ["Verification", "Trajectory", "verify", "sample_trajectory", "TERMINAL_TOLERANCE"]
+__all__ = ["Verification", "verify", "TERMINAL_TOLERANCE"]
 
 #: Largest terminal tool-position error accepted without refinement [m] (SPEC §5: 1 cm).
 TERMINAL_TOLERANCE = 0.01
@@ -93,53 +93,6 @@ class Verification:
         out = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(self).items()}
         out["passed"] = self.passed
         return out
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """A sampled trajectory: times ``t`` (K,) [s], joint positions ``q``, velocities ``qd`` and
-    torques ``tau`` (K, nv) — ``tau[k]`` is applied from ``t[k]`` to ``t[k + 1]`` — and the tool
-    position ``tool`` (K, 3) [m] in the base frame. ``velocity_limit`` and ``effort_limit`` (nv,)
-    are the robot's limits, for plots."""
-
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    tau: np.ndarray
-    tool: np.ndarray
-    velocity_limit: np.ndarray | None = None
-    effort_limit: np.ndarray | None = None
-
-    def header(self) -> list[str]:
-        nv = self.q.shape[1]
-        return (
-            ["t"]
-            + [f"q{i}" for i in range(1, nv + 1)]
-            + [f"qd{i}" for i in range(1, nv + 1)]
-            + [f"tau{i}" for i in range(1, nv + 1)]
-            + ["x", "y", "z"]
-        )
-
-    def table(self) -> np.ndarray:
-        return np.column_stack([self.t, self.q, self.qd, self.tau, self.tool])
-
-    def write_csv(self, path) -> None:
-        """Write SPEC §7's ``trajectory.csv``: ``t,q1..qn,qd1..qdn,tau1..taun,x,y,z``."""
-        np.savetxt(path, self.table(), delimiter=",", header=",".join(self.header()), comments="", fmt="%.9g")
-
-
-def sample_trajectory(problem: ShootingProblem, y: np.ndarray) -> Trajectory:
-    """The planned trajectory at every integration sub-step, ``t = 0`` to ``t = tf``."""
-    tf, nodes, controls = problem.unpack(y)
-    N, S, nv = problem.intervals, problem.substeps, problem.nv
-    prop = problem.transcription.propagate(problem.robot, nodes[:-1], controls, tf, N, S, False)
-    states = np.vstack([prop.states[:, :S].reshape(-1, 2 * nv), nodes[-1]])
-    tau = np.vstack([prop.torques[:, :S].reshape(-1, nv), prop.torques[-1, S]])
-    t = np.linspace(0.0, tf, N * S + 1)
-    tool = np.array([problem.robot.tool_position(x[:nv]) for x in states])
-    return Trajectory(
-        t, states[:, :nv], states[:, nv:], tau, tool, problem.robot.velocity_limit, problem.robot.effort_limit
-    )
 
 
 def _dynamics(problem: ShootingProblem, node: np.ndarray, u: np.ndarray):

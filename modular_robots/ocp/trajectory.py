@@ -1,0 +1,228 @@
+"""A plan as a robot consumes it: rows under the *acceleration contract* (SPEC §7), and their exact
+resampling at a controller rate.
+
+**The acceleration contract.** On ``[t_i, t_{i+1})`` the joint acceleration is ``qdd_i``,
+constant, so each row follows exactly from the one before
+(``q_{i+1} = q_i + qd_i h + qdd_i h^2 / 2``, ``qd_{i+1} = qd_i + qdd_i h``), and ``tau_i`` is the
+inverse dynamics at ``(q_i, qd_i, qdd_i)`` with the drive's armature: the torque the drive must
+deliver at that instant. Where the acceleration jumps, a row carries the value that starts there;
+the last row, at ``tf``, the robot at rest (``qdd = 0``, the holding torque).
+
+* The inverse transcription's plan *is* such a motion (a parabola per interval), so its rows are
+  the integration sub-steps and the contract holds to rounding.
+* The forward transcription's acceleration changes continuously within an interval, so its rows
+  are dense (:data:`FORWARD_ROW_STEP` apart) and each ``qdd_i`` is the plan's mean acceleration
+  to the next row (its velocities re-integrated from each planned node under the interval's
+  torque): the rows follow the plan's velocities exactly and its positions to about
+  ``|jerk| h^3 / 12`` per row.
+
+Because the rows define the motion exactly, :meth:`Trajectory.at` evaluates the plan at any time;
+:func:`controller_rate` uses it for the *zero-order-hold contract* of a controller-rate file.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from ..robot import RobotModel
+
+__all__ = ["Trajectory", "sample_trajectory", "controller_rate", "joint_trajectory", "FORWARD_ROW_STEP"]
+
+#: Largest time between two rows of a forward-transcription plan [s].
+FORWARD_ROW_STEP = 1e-3
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A plan sampled under the acceleration contract (module docstring).
+
+    ``t`` (K,) [s]; joint positions ``q``, velocities ``qd``, accelerations ``qdd`` and torques
+    ``tau`` (K, nv) [rad, m; /s; /s^2; N m, N]; ``tool`` (K, 3) the tool position [m] in the base
+    frame. ``velocity_limit`` and ``effort_limit`` (nv,) are the robot's limits, ``velocity_bound``
+    and ``effort_bound`` the ones the plan was optimised within (the limits times the scenario's
+    margins); all four are for plots and reports.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    tool: np.ndarray
+    velocity_limit: np.ndarray | None = None
+    effort_limit: np.ndarray | None = None
+    velocity_bound: np.ndarray | None = None
+    effort_bound: np.ndarray | None = None
+
+    @property
+    def nv(self) -> int:
+        return self.q.shape[1]
+
+    def header(self, accelerations: bool = True) -> list[str]:
+        """``t,q1..qn,qd1..qdn[,qdd1..qddn],tau1..taun,x,y,z``."""
+        groups = ("q", "qd", "qdd", "tau") if accelerations else ("q", "qd", "tau")
+        return ["t", *self.header_names(self.nv, groups), "x", "y", "z"]
+
+    def table(self, accelerations: bool = True) -> np.ndarray:
+        columns = [self.t, self.q, self.qd, self.qdd, self.tau, self.tool]
+        return np.column_stack(columns if accelerations else columns[:3] + columns[4:])
+
+    def write_csv(self, path, accelerations: bool = True) -> None:
+        """Write the rows as CSV (SPEC §7's ``trajectory.csv``), every number to full precision.
+        Without ``accelerations`` the file has no ``qdd`` columns and follows the
+        zero-order-hold contract instead (see :func:`controller_rate`)."""
+        np.savetxt(
+            path,
+            self.table(accelerations),
+            delimiter=",",
+            header=",".join(self.header(accelerations)),
+            comments="",
+            fmt="%.17g",
+        )
+
+    @classmethod
+    def read_csv(cls, path) -> Trajectory:
+        """Read a file written by :meth:`write_csv` with its ``qdd`` columns (the acceleration
+        contract)."""
+        with open(path) as f:
+            header = f.readline().strip().split(",")
+        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        nv = (len(header) - 4) // 4
+        if len(header) != 4 * nv + 4 or header != ["t", *Trajectory.header_names(nv), "x", "y", "z"]:
+            raise ValueError(
+                f"{path}: expected the header t,q1..qn,qd1..qdn,qdd1..qddn,tau1..taun,x,y,z, got {','.join(header)}"
+            )
+        blocks = [table[:, 1 + k * nv : 1 + (k + 1) * nv] for k in range(4)]
+        return cls(table[:, 0], *blocks, table[:, -3:])
+
+    @staticmethod
+    def header_names(nv: int, groups=("q", "qd", "qdd", "tau")) -> list[str]:
+        return [f"{g}{i}" for g in groups for i in range(1, nv + 1)]
+
+    def at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q, qd, qdd)`` of the plan at ``times`` [s], exactly, from the contract: the row at or
+        before each time and its constant acceleration (right-hand values at the rows)."""
+        times = np.clip(np.asarray(times, dtype=float), self.t[0], self.t[-1])
+        i = np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, len(self.t) - 1)
+        s = (times - self.t[i])[:, None]
+        qdd = self.qdd[i]
+        return self.q[i] + self.qd[i] * s + 0.5 * qdd * s * s, self.qd[i] + qdd * s, qdd
+
+
+def joint_trajectory(trajectory: Trajectory, joint_names: list[str]) -> dict:
+    """``trajectory`` shaped like ROS ``trajectory_msgs/JointTrajectory`` (as a JSON-ready dict):
+    ``joint_names`` and ``points`` with ``positions``, ``velocities``, ``accelerations``,
+    ``effort`` and ``time_from_start`` as ``{sec, nanosec}``."""
+    points = []
+    for i, t in enumerate(trajectory.t):
+        nanoseconds = round(float(t) * 1e9)
+        points.append(
+            {
+                "positions": trajectory.q[i].tolist(),
+                "velocities": trajectory.qd[i].tolist(),
+                "accelerations": trajectory.qdd[i].tolist(),
+                "effort": trajectory.tau[i].tolist(),
+                "time_from_start": {"sec": nanoseconds // 1_000_000_000, "nanosec": nanoseconds % 1_000_000_000},
+            }
+        )
+    return {"joint_names": list(joint_names), "points": points}
+
+
+def sample_trajectory(problem, y: np.ndarray) -> Trajectory:
+    """The plan of the solution ``y`` of ``problem`` (a
+    :class:`~modular_robots.ocp.shooting.ShootingProblem`) as acceleration-contract rows, from
+    ``t = 0`` to ``t = tf``.
+
+    The rows are chained from the start state, each from the one before, so the contract holds to
+    rounding even where the solver left a continuity gap at a node (at most its constraint
+    tolerance); the chain ends at the goal within the sum of those gaps.
+    """
+    robot, tr = problem.robot, problem.transcription
+    tf, nodes, controls = problem.unpack(y)
+    N, S, nv = problem.intervals, problem.substeps, problem.nv
+    if tr.velocity_linear_in_time:  # inverse: the controls are the accelerations
+        t = np.linspace(0.0, tf, N * S + 1)
+        qdd = np.vstack([np.repeat(controls, S, axis=0), np.zeros(nv)])
+    else:
+        t, qd = _dense_velocities(robot, tr, nodes, controls, tf / N)
+        qdd = np.vstack([np.diff(qd, axis=0) / np.diff(t)[:, None], np.zeros(nv)])
+    q, qd = _chain(t, nodes[0, :nv], nodes[0, nv:], qdd)
+    tau = np.array([robot.rnea(*row) for row in zip(q, qd, qdd)])
+    tool = np.array([robot.tool_position(x) for x in q])
+    return Trajectory(
+        t, q, qd, qdd, tau, tool, robot.velocity_limit, robot.effort_limit, problem.velocity_bound, problem.effort_bound
+    )
+
+
+def _chain(t: np.ndarray, q0: np.ndarray, qd0: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities at ``t`` of the motion from ``(q0, qd0)`` whose acceleration is
+    ``qdd[i]`` on ``[t_i, t_{i+1})``."""
+    h = np.diff(t)[:, None]
+    dq = np.zeros((len(t), len(q0)))
+    dv = np.zeros_like(dq)
+    dv[1:] = qdd[:-1] * h
+    q, qd = np.empty_like(dq), np.empty_like(dq)
+    q[0], qd[0] = q0, qd0
+    for i in range(len(t) - 1):
+        qd[i + 1] = qd[i] + dv[i + 1]
+        q[i + 1] = q[i] + qd[i] * h[i] + 0.5 * qdd[i] * h[i] * h[i]
+    return q, qd
+
+
+def _dense_velocities(robot: RobotModel, tr, nodes: np.ndarray, controls: np.ndarray, h_interval: float):
+    """Row times at most :data:`FORWARD_ROW_STEP` apart and the plan's velocities there: each
+    interval re-integrated (DOP853) from its planned node under its control law."""
+    nv = robot.nv
+    k = max(1, math.ceil(h_interval / FORWARD_ROW_STEP - 1e-9))
+    local = np.linspace(0.0, h_interval, k + 1)
+    times, velocities = [], []
+    for m, (node, u) in enumerate(zip(nodes[:-1], controls)):
+
+        def rhs(s, x, node=node, u=u):
+            return np.concatenate([x[nv:], robot.aba(x[:nv], x[nv:], tr.torque(robot, node, u, s))])
+
+        sol = solve_ivp(rhs, (0.0, h_interval), node, method="DOP853", rtol=1e-12, atol=1e-12, t_eval=local[:-1])
+        times.append(m * h_interval + local[:-1])
+        velocities.append(sol.y.T[:, nv:] if sol.success else np.full((k, nv), np.nan))
+    t = np.concatenate([*times, [len(controls) * h_interval]])
+    return t, np.vstack([*velocities, nodes[-1, nv:]])
+
+
+def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> Trajectory:
+    """The plan at a controller's rate [Hz]: rows every ``1 / rate`` s from 0 to ``tf`` (and one at
+    ``tf``), positions, velocities and accelerations exact (:meth:`Trajectory.at`).
+
+    Its torques follow the *zero-order-hold contract* (SPEC §7): ``tau_i``, held from ``t_i`` to
+    ``t_{i+1}``, drives the robot from row ``i`` to row ``i + 1``. It is the inverse dynamics at row
+    ``i`` with the mean acceleration to the next row, so that a torque held across an instant
+    where the plan's acceleration jumps still lands on the next row's velocity. ``qdd`` holds the
+    plan's own acceleration at each row.
+    """
+    if not math.isfinite(rate) or rate <= 0.0:
+        raise ValueError(f"rate: expected a positive number of rows per second, got {rate}")
+    tf = float(trajectory.t[-1])
+    count = math.floor(tf * rate + 1e-9)
+    t = np.arange(count + 1) / rate
+    if t[-1] < tf - 1e-12:
+        t = np.append(t, tf)
+    q, qd, qdd = trajectory.at(t)
+    h = np.diff(t)[:, None]
+    mean = np.vstack([(qd[1:] - qd[:-1]) / h, np.zeros(robot.nv)])
+    tau = np.array([robot.rnea(*row) for row in zip(q, qd, mean)])
+    tool = np.array([robot.tool_position(x) for x in q])
+    return Trajectory(
+        t,
+        q,
+        qd,
+        qdd,
+        tau,
+        tool,
+        trajectory.velocity_limit,
+        trajectory.effort_limit,
+        trajectory.velocity_bound,
+        trajectory.effort_bound,
+    )
