@@ -19,8 +19,10 @@ run: install
 	$(VENV)/bin/modular-robots run scenarios/paper-5kg.yaml --out results/paper-5kg
 	@echo "results: $(CURDIR)/results/paper-5kg/ (result.json, winner.urdf, trajectory.csv, joints.png, pruning.png)"
 
-# Import layers first (seconds), then the tests.
+# Lint, format and import layers first (seconds), then the tests.
 test: install
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/lint-imports
 	$(PY) -m pytest -q
 

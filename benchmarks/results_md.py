@@ -1,4 +1,5 @@
-"""Write ``benchmarks/RESULTS.md``: our figures beside the paper's, from ``results/*.json``."""
+"""Write ``benchmarks/RESULTS.md``: our figures beside the paper's, from ``results/*.json``, then the
+measurement history, ``benchmarks/history.md``, as its last section."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 from ._common import RESULTS
 
 OUT = Path(__file__).resolve().parent / "RESULTS.md"
+HISTORY = Path(__file__).resolve().parent / "history.md"
 PAPER_WINNER = "B-J1-L3-J1-L3-J1-L2-J1-L1-E1"
 
 
@@ -24,87 +26,163 @@ def _fmt(value, digits=3) -> str:
     return str(value)
 
 
+def _history() -> list[str]:
+    """``history.md`` as the ``## History`` section: its title dropped, its headings one level down."""
+    if not HISTORY.is_file():
+        return []
+    lines, fenced = ["## History", ""], False
+    body = HISTORY.read_text().splitlines()
+    if body and body[0].startswith("# "):
+        body = body[1:]
+    for line in body:
+        if line.startswith("```"):
+            fenced = not fenced
+        lines.append("#" + line if line.startswith("#") and not fenced else line)
+    while lines[-1] == "":
+        lines.pop()
+    return lines
+
+
 def build() -> str:
     feasibility, ocp, pruning = _load("feasibility"), _load("ocp"), _load("pruning")
-    lines = ["# Benchmark results", "",
-             "Written by `make bench` from `benchmarks/results/*.json`; machine facts are in each JSON file.",
-             "Paper figures: SPEC §2 (50 kg payload, MATLAB fmincon); ours: `scenarios/paper-5kg.yaml` "
-             "(the printed 50 kg task is infeasible, SPEC §4).", "",
-             "| figure | paper | ours | why they differ |", "|---|---|---|---|"]
-    lines.append("| compositions enumerated | 3108 | 3108 | same grammar (SPEC §3) |")
+    lines = [
+        "# Benchmark results",
+        "",
+        "Written by `make bench` from `benchmarks/results/*.json`; machine facts are in each JSON file.",
+        "Paper figures: the paper's (50 kg payload, MATLAB fmincon; see `docs/spec-notes.md`); ours: "
+        "`scenarios/paper-5kg.yaml` (the printed 50 kg task is infeasible, `docs/known-limits.md`). "
+        "How these figures evolved is in the last section, History (`benchmarks/history.md`).",
+        "",
+        "| figure | paper | ours | why they differ |",
+        "|---|---|---|---|",
+    ]
+    lines.append("| compositions enumerated | 3108 | 3108 | same grammar |")
     if feasibility:
         five = next(p for p in feasibility["payloads"] if p["payload_kg"] == 5.0)
         fifty = next(p for p in feasibility["payloads"] if p["payload_kg"] == 50.0)
-        lines.append(f"| step-B survivors | 21 (50 kg) | {five['feasible']} (5 kg); {fifty['feasible']} (50 kg) | "
-                     "the paper's geometry details are not printed; under convention A a 50 kg payload is beyond "
-                     f"every composition (best torque ratio {fifty['best_failed_torque_ratio']:.2f}x) |")
+        lines.append(
+            f"| step-B survivors | 21 (50 kg) | {five['feasible']} (5 kg); {fifty['feasible']} (50 kg) | "
+            "the paper's geometry details are not printed; under convention A a 50 kg payload is beyond "
+            f"every composition (best torque ratio {fifty['best_failed_torque_ratio']:.2f}x) |"
+        )
     paper_row = None
     if pruning:
         paper_row = next((r for r in pruning["rows"] if r["scenario"] == "paper-5kg"), None)
     if paper_row:
         lines += [
             f"| winner | {PAPER_WINNER} | {paper_row['winner_ratio']} (tf {paper_row['tf_s']:.3f} s) | "
-            "under convention A the paper's winner misses the start by centimetres (SPEC §3), and the payload "
-            "is 5 kg, not 50 kg |",
+            "under convention A (`docs/formats.md`) the paper's winner misses the start by centimetres, and "
+            "the payload is 5 kg, not 50 kg |",
             f"| optimizer iterations, ratio rule | 16 rounds, 4 candidates left | "
             f"{paper_row['iterations_ratio']} iterations in total over {paper_row['candidates']} "
-            f"candidates ({paper_row['feasible']} compositions) | we count every candidate's iterations (the paper's 16 "
-            "are lockstep rounds); a composition whose fastest IK pair's straight line crosses an obstacle is "
-            "optimised from its fastest clear pair too |",
+            f"candidates ({paper_row['feasible']} compositions) | we count every candidate's iterations "
+            "(the paper's 16 are lockstep rounds); a composition whose fastest IK pair's straight line crosses "
+            "an obstacle is optimised from its fastest clear pair too |",
             f"| optimizer iterations, brute force | 1.5x the ratio rule's | {paper_row['iterations_none']} "
-            f"({paper_row['iteration_saving_x']:.2f}x the ratio rule's) | more candidates ({paper_row['candidates']} from {paper_row['feasible']} compositions vs 21) give pruning "
+            f"({paper_row['iteration_saving_x']:.2f}x the ratio rule's) | more candidates "
+            f"({paper_row['candidates']} from {paper_row['feasible']} compositions vs 21) give pruning "
             "more to remove; trust-constr needs more iterations than fmincon's interior point |",
             f"| wall time saving of pruning | — | {paper_row['wall_saving_x']:.2f}x "
-            f"({paper_row['wall_none_s']:.0f} s → {paper_row['wall_ratio_s']:.0f} s, steps C+D) | the paper gives none |",
+            f"({paper_row['wall_none_s']:.0f} s → {paper_row['wall_ratio_s']:.0f} s, steps C+D) | "
+            "the paper gives none |",
             f"| same winner with and without pruning | yes | {'yes' if paper_row['same_winner'] else 'NO'} | "
-            "the guard (pruning.py) trusts only near-feasible costs and waits while a trusted cost still falls |",
+            "the guard (`modular_robots/pruning.py`) trusts only near-feasible costs and waits while a trusted "
+            "cost still falls |",
             f"| best-to-worst converged cost | 45.2 % | {paper_row['best_to_worst'] * 100:.1f} % | "
             "different survivors and payload |",
         ]
     lines.append("")
+    if feasibility:
+        lines += [
+            "## Step B (feasibility cascade, paper catalogue, 5 kg)",
+            "",
+            "Seconds are CPU seconds of each test in one process, and wall seconds for the whole cascade.",
+            "",
+            "| stage | compositions tested | removed | seconds | compositions per s |",
+            "|---|---|---|---|---|",
+        ]
+        for r in feasibility["rows"]:
+            lines.append(
+                f"| {r['stage']} | {r['compositions_tested']} | {r['removed']} | {_fmt(r['cpu_seconds'])} | "
+                f"{r['compositions_per_second']:.0f} |"
+            )
+        thorough = feasibility.get("thoroughness")
+        if thorough:
+            lines += [
+                "",
+                f"A {thorough['thorough_seeds'] // thorough['default_seeds']}x more thorough IK search "
+                f"({thorough['thorough_seeds']} seeds instead of {thorough['default_seeds']}) keeps "
+                f"{thorough['thorough_survivors']} compositions, the default {thorough['default_survivors']}; "
+                f"lost by the default: {', '.join(thorough['lost_by_default']) or 'none'}.",
+            ]
+        lines.append("")
     if ocp:
         conv = ocp["convergence"]
-        lines += ["## Step C (trajectories)", "",
-                  "| transcription | compositions verified (by any of its candidates) | candidates verified | "
-                  "median s per candidate | median s, 5 DOF | median iterations |", "|---|---|---|---|---|---|"]
+        lines += [
+            "## Step C (trajectories)",
+            "",
+            "| transcription | compositions verified (by any of its candidates) | candidates verified | "
+            "median s per candidate | median s, 5 DOF | median iterations |",
+            "|---|---|---|---|---|---|",
+        ]
         for name, c in conv.items():
-            lines.append(f"| {name} | {c['compositions_converged']} of {c['compositions']} "
-                         f"({c['share'] * 100:.0f} %) | {c['converged']} of {c['candidates']} | "
-                         f"{_fmt(c['median_seconds'])} | {_fmt(c['median_seconds_5dof'])} | "
-                         f"{_fmt(c['median_iterations'])} |")
-        lines += ["", "| composition | transcription | status | median s | iterations | tf s | terminal error mm |",
-                  "|---|---|---|---|---|---|---|"]
+            lines.append(
+                f"| {name} | {c['compositions_converged']} of {c['compositions']} "
+                f"({c['share'] * 100:.0f} %) | {c['converged']} of {c['candidates']} | "
+                f"{_fmt(c['median_seconds'])} | {_fmt(c['median_seconds_5dof'])} | "
+                f"{_fmt(c['median_iterations'])} |"
+            )
+        lines += [
+            "",
+            "| composition | transcription | status | median s | iterations | tf s | terminal error mm |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for r in ocp["rows"]:
-            lines.append(f"| {r['composition']} | {r['transcription']} | {r['status']} | {_fmt(r['median_s'])} | "
-                         f"{r['iterations']} | {_fmt(r['tf_s'], 4)} | {_fmt(r['terminal_error_mm'])} |")
+            lines.append(
+                f"| {r['composition']} | {r['transcription']} | {r['status']} | {_fmt(r['median_s'])} | "
+                f"{r['iterations']} | {_fmt(r['tf_s'], 4)} | {_fmt(r['terminal_error_mm'])} |"
+            )
         lines += ["", "| Jacobians | status | iterations | seconds | tf s (exact 2.0) |", "|---|---|---|---|---|"]
         for r in ocp["jacobians"]:
-            lines.append(f"| {r['jacobian']} | {r['status']} | {r['iterations']} | {_fmt(r['seconds'])} | "
-                         f"{_fmt(r['tf_s'], 5)} |")
+            lines.append(
+                f"| {r['jacobian']} | {r['status']} | {r['iterations']} | {_fmt(r['seconds'])} | {_fmt(r['tf_s'], 5)} |"
+            )
         lines.append("")
     if pruning:
-        lines += ["## Step D (pruning vs brute force)", "",
-                  "| scenario | feasible / candidates | winner | same winner | iterations ratio / none | saving | "
-                  "wall s ratio / none | saving | pruned |", "|---|---|---|---|---|---|---|---|---|"]
+        lines += [
+            "## Step D (pruning vs brute force)",
+            "",
+            "| scenario | feasible / candidates | winner | same winner | iterations ratio / none | saving | "
+            "wall s ratio / none | saving | pruned |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
         for r in pruning["rows"]:
-            lines.append(f"| {r['scenario']} | {r['feasible']} / {r['candidates']} | "
-                         f"{r['winner_ratio']} | {r['same_winner']} | "
-                         f"{r['iterations_ratio']} / {r['iterations_none']} | {r['iteration_saving_x']:.2f}x | "
-                         f"{r['wall_ratio_s']:.1f} / {r['wall_none_s']:.1f} | {r['wall_saving_x']:.2f}x | "
-                         f"{r['pruned']} |")
-        lines += ["", "The ratio rule at other thresholds, bare (no progress window, no patience) and with the "
-                  "default guard (with and without the candidates' cost bounds), replayed on each scenario's "
-                  "brute-force histories (same manager, no re-solve); "
-                  "`hindsight` is the floor of any rule that never prunes a candidate ending within the "
-                  "threshold of the winner (the others pruned at `start_iteration`):",
-                  "", "| scenario | guard | threshold | iterations | saving | same winner | pruned |",
-                  "|---|---|---|---|---|---|---|"]
+            lines.append(
+                f"| {r['scenario']} | {r['feasible']} / {r['candidates']} | "
+                f"{r['winner_ratio']} | {r['same_winner']} | "
+                f"{r['iterations_ratio']} / {r['iterations_none']} | {r['iteration_saving_x']:.2f}x | "
+                f"{r['wall_ratio_s']:.1f} / {r['wall_none_s']:.1f} | {r['wall_saving_x']:.2f}x | "
+                f"{r['pruned']} |"
+            )
+        lines += [
+            "",
+            "The ratio rule at other thresholds, bare (no progress window, no patience) and with the "
+            "default guard (with and without the candidates' cost bounds), replayed on each scenario's "
+            "brute-force histories (same manager, no re-solve); "
+            "`hindsight` is the floor of any rule that never prunes a candidate ending within the "
+            "threshold of the winner (the others pruned at `start_iteration`):",
+            "",
+            "| scenario | guard | threshold | iterations | saving | same winner | pruned |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for name, d in pruning.get("details", {}).items():
             for r in d.get("replayed_thresholds", []):
-                lines.append(f"| {name} | {r.get('guard', 'bare')} | {r['threshold']} | {r['iterations']} | "
-                             f"{r['saving_x']:.2f}x | {r['same_winner']} | {r['pruned']} |")
+                lines.append(
+                    f"| {name} | {r.get('guard', 'bare')} | {r['threshold']} | {r['iterations']} | "
+                    f"{r['saving_x']:.2f}x | {r['same_winner']} | {r['pruned']} |"
+                )
         lines.append("")
-    return "\n".join(lines)
+    return "\n".join(lines + _history())
 
 
 def main() -> None:
