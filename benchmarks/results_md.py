@@ -182,6 +182,27 @@ def build() -> str:
                     f"{r['saving_x']:.2f}x | {r['same_winner']} | {r['pruned']} |"
                 )
         lines.append("")
+    margins = _load("margins")
+    if margins:
+        lines += [
+            "## Headroom for feedback (optimizer margins)",
+            "",
+            "Each scenario run with the default margins and at the full limits; the winner tracked at "
+            "1 kHz by computed torque on its exported URDF, torques clipped at the URDF's limits "
+            "(`modular_robots/ocp/tracking.py`):",
+            "",
+            "| scenario | margins | winner | tf s | tf / full limits | effort used | velocity used | "
+            "ticks clipped | tool error at tf mm | largest deviation mm | tracked speed / limit |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in margins["rows"]:
+            lines.append(
+                f"| {r['scenario']} | {r['margins']} | {r['winner']} | {r['tf_s']:.4f} | "
+                f"{r['tf_vs_full_limits']:.3f} | {r['effort_used']:.3f} | {r['velocity_used']:.3f} | "
+                f"{r['tracking_clipped_share'] * 100:.1f} % | {r['tracking_tool_error_mm']:.3g} | "
+                f"{r['tracking_max_deviation_mm']:.3g} | {r['tracking_velocity_ratio']:.4f} |"
+            )
+        lines.append("")
     return "\n".join(lines + _history())
 
 
