@@ -57,7 +57,16 @@ from .ocp.candidate import CandidateResult, CandidateStatus
 from .ocp.solver import Iterate
 from .scenario import PruningSettings
 
-__all__ = ["Progress", "PruningManager", "RoundCosts", "ratio_rule", "reference_cost", "GUARD_VIOLATION"]
+__all__ = [
+    "Progress",
+    "PruningManager",
+    "RoundCosts",
+    "bound_rule",
+    "paper_rule",
+    "ratio_rule",
+    "reference_cost",
+    "GUARD_VIOLATION",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -102,10 +111,10 @@ class RoundCosts:
 
 def ratio_rule(
     view: RoundCosts, settings: PruningSettings = PruningSettings(), guard_violation: float = GUARD_VIOLATION
-) -> set[str]:
-    """Names of the candidates to prune after a round: those whose own iterate is trusted and
-    whose cost exceeds the guarded reference by more than ``settings.threshold`` (relative), from
-    ``settings.start_iteration`` on.
+) -> dict[str, str]:
+    """The candidates to prune after a round, each with the reason: those whose own iterate is
+    trusted and whose cost exceeds the guarded reference by more than ``settings.threshold``
+    (relative), from ``settings.start_iteration`` on.
 
     With ``view.earlier`` (the progress guard), a candidate is judged only if it also had a
     trusted cost ``earlier[k]`` a window of iterations ago, and it is kept while
@@ -116,19 +125,28 @@ def ratio_rule(
     ``view.costs`` is judged on its floor only and is no reference.
     """
     if view.iteration < settings.start_iteration:
-        return set()
+        return {}
     reference = reference_cost(view.costs, view.violations, view.converged, guard_violation)
     if reference is None or reference <= 0.0:
-        return set()
+        return {}
 
     def above(cost: float) -> bool:
         return (cost - reference) / reference > settings.threshold
 
-    chosen = set()
+    def versus(what: str, cost: float) -> str:
+        return (
+            f"ratio rule: {what} {cost:.4g} is {cost / reference:.2f}x the reference {reference:.4g} "
+            f"(threshold {settings.threshold:g})"
+        )
+
+    chosen: dict[str, str] = {}
     for k, c in view.costs.items():
         if view.violations[k] > guard_violation:
             if settings.patience and view.untrusted_for.get(k, 0) >= settings.patience:
-                chosen.add(k)
+                chosen[k] = (
+                    f"ratio rule: not trusted (violation > {guard_violation:g}) for "
+                    f"{view.untrusted_for[k]} iterations, patience {settings.patience}"
+                )
             continue
         if not above(c):
             continue
@@ -136,9 +154,40 @@ def ratio_rule(
             k not in view.earlier or not above(c - settings.lookahead * (view.earlier[k] - c))
         ):
             continue
-        chosen.add(k)
-    chosen |= {k for k, b in view.floors.items() if above(b)}
+        chosen[k] = versus("trusted cost", c)
+    for k, b in view.floors.items():
+        if above(b) and k not in chosen:
+            chosen[k] = versus("lower bound", b)
     return chosen
+
+
+def paper_rule(view: RoundCosts, settings: PruningSettings = PruningSettings()) -> dict[str, str]:
+    """The paper's rule as printed, for comparison: from ``start_iteration`` on, prune ``k`` when
+    ``(c_k - c_min) / c_min > threshold``, ``c_min`` the smallest current cost of any candidate
+    (feasible or not) or converged one; no guard, no bounds."""
+    costs = list(view.costs.values()) + list(view.converged.values())
+    if view.iteration < settings.start_iteration or not costs or min(costs) <= 0.0:
+        return {}
+    reference = min(costs)
+    return {
+        k: f"paper rule: cost {c:.4g} is {c / reference:.2f}x the best {reference:.4g} "
+        f"(threshold {settings.threshold:g})"
+        for k, c in view.costs.items()
+        if (c - reference) / reference > settings.threshold
+    }
+
+
+def bound_rule(bounds: Mapping[str, float], converged: Mapping[str, float]) -> dict[str, str]:
+    """Safe pruning: a candidate whose lower bound on its optimal cost exceeds the best verified
+    cost can never win, whatever its iterates; no threshold and no heuristic."""
+    if not converged:
+        return {}
+    best = min(converged.values())
+    return {
+        k: f"bound: no motion of it is faster than {b:.4g}, above the best verified cost {best:.4g}"
+        for k, b in bounds.items()
+        if b > best * (1.0 + 1e-12)
+    }
 
 
 @dataclass(frozen=True)
@@ -197,11 +246,12 @@ class PruningManager:
                     else:
                         self._remember(name, value)
                 alive = [n for n in alive if n not in self.results]
-                pruned = self._prune(alive, converged, round_)
+                reasons = self._prune(alive, converged, round_)
+                pruned = [n for n in alive if n in reasons]
                 if pruned:
                     for name, result in self._stop(pruned).items():
-                        self.results[name] = result.pruned(round_)
-                    alive = [n for n in alive if n not in pruned]
+                        self.results[name] = result.pruned(round_, reasons[name])
+                    alive = [n for n in alive if n not in reasons]
                 best = reference_cost(
                     {n: self.last[n].cost for n in alive if n in self.last},
                     {n: self.last[n].constraint_violation for n in alive if n in self.last},
@@ -238,18 +288,21 @@ class PruningManager:
             for name, result in self.executor.stop(names).items()
         }
 
-    def _prune(self, alive: list[str], converged: dict[str, float], round_: int) -> list[str]:
-        if self.settings.rule == "none":
-            return []
+    def _prune(self, alive: list[str], converged: dict[str, float], round_: int) -> dict[str, str]:
+        """The live candidates to prune after round ``round_``, with the reason of each."""
+        rule = self.settings.rule
+        if rule == "none":
+            return {}
         # A candidate re-solving with refined sub-steps starts from an optimum that failed
         # verification; its cost jumps while the new sub-step constraints are restored, so it is
         # judged on that optimum and is no reference.
         live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
-        floors = {
-            n: max(self.last[n].cost_bound, self.floor.get(n, 0.0) if self.last[n].refinement > 0 else 0.0)
-            for n in alive
-            if n in self.last
-        }
+        costs = {n: self.last[n].cost for n in live}
+        violations = {n: self.last[n].constraint_violation for n in live}
+        if rule == "paper":
+            return paper_rule(RoundCosts(round_, costs, violations, converged), self.settings)
+        bounds = {n: self.last[n].cost_bound for n in alive if n in self.last}
+        floors = {n: max(bounds[n], self.floor.get(n, 0.0) if self.last[n].refinement > 0 else 0.0) for n in bounds}
         s = self.settings
         earlier = None
         if s.window:
@@ -258,17 +311,8 @@ class PruningManager:
                 for n in live
                 if len(self.trusted[n]) == s.window + 1 and self.trusted[n][0] is not None
             }
-        view = RoundCosts(
-            round_,
-            {n: self.last[n].cost for n in live},
-            {n: self.last[n].constraint_violation for n in live},
-            converged,
-            earlier,
-            self.untrusted_for,
-            floors,
-        )
-        chosen = ratio_rule(view, s, self.guard_violation)
-        return [n for n in alive if n in chosen]
+        view = RoundCosts(round_, costs, violations, converged, earlier, self.untrusted_for, floors)
+        return {**ratio_rule(view, s, self.guard_violation), **bound_rule(bounds, converged)}
 
     def _remember(self, name: str, iterate: Iterate) -> None:
         previous = self.last.get(name)

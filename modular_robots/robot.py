@@ -100,11 +100,11 @@ class RobotModel:
         """Symmetric velocity bounds [rad/s or m/s]."""
         return self.model.velocityLimit.copy()
 
-    def travel_time_bound(self, q_a: np.ndarray, q_b: np.ndarray) -> float:
-        """No motion from rest at ``q_a`` to ``q_b`` within the velocity limits takes less than
-        ``max_i |q_b,i - q_a,i| / qdot_max,i`` [s] (joints without a finite positive limit
-        bound nothing)."""
-        velocity = self.velocity_limit
+    def travel_time_bound(self, q_a: np.ndarray, q_b: np.ndarray, velocity: np.ndarray | None = None) -> float:
+        """No motion from rest at ``q_a`` to ``q_b`` within the velocity limits (or the bounds
+        ``velocity``, if given) takes less than ``max_i |q_b,i - q_a,i| / qdot_max,i`` [s]
+        (joints without a finite positive limit bound nothing)."""
+        velocity = self.velocity_limit if velocity is None else np.asarray(velocity, dtype=float)
         limited = np.isfinite(velocity) & (velocity > 0)
         moves = np.abs(np.asarray(q_b, dtype=float) - np.asarray(q_a, dtype=float))
         return float(np.max(moves[limited] / velocity[limited], initial=0.0))

@@ -13,7 +13,7 @@ from .exceptions import InputError, ScenarioError
 __all__ = ["SphereObstacle", "Task", "OptimizerSettings", "PruningSettings", "Scenario", "load_scenario"]
 
 COSTS = ("time", "effort")
-RULES = ("ratio", "none")
+RULES = ("ratio", "paper", "none")
 TRANSCRIPTIONS = ("forward", "inverse")
 
 

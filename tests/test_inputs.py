@@ -176,7 +176,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
             "threshold:",
             "pruning.threshold: expected a number, got the string 'half'",
         ),
-        ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, none; got 'greedy'"),
+        ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, paper, none; got 'greedy'"),
         (
             "threshold: 0.5",
             "threshold: 0.5\n  patience: -1",

@@ -103,6 +103,8 @@ class CandidateResult:
     constraint_violation: float = float("nan")
     cost_history: tuple[float, ...] = ()
     violation_history: tuple[float, ...] = ()
+    #: Per iteration, how many times the sub-steps had been refined (0: the first solve).
+    refinement_history: tuple[int, ...] = ()
     verification: Verification | None = None
     substeps: int = 0
     pruned_at_iteration: int | None = None
@@ -140,13 +142,15 @@ class CandidateResult:
             "verification": self.verification.to_json() if self.verification else None,
             "cost_history": [_finite(c) for c in self.cost_history],
             "violation_history": [_finite(c) for c in self.violation_history],
+            "refinement_history": list(self.refinement_history),
         }
 
-    def pruned(self, iteration: int) -> CandidateResult:
+    def pruned(self, iteration: int, reason: str = "") -> CandidateResult:
+        """This result, pruned at ``iteration`` for ``reason`` (which rule, which bound or ratio)."""
         return replace(
             self,
             status=CandidateStatus.PRUNED,
-            reason=f"pruned at iteration {iteration}",
+            reason=f"pruned at iteration {iteration}" + (f" by the {reason}" if reason else ""),
             pruned_at_iteration=iteration,
         )
 
@@ -208,6 +212,7 @@ class Candidate:
         self.result: CandidateResult | None = None
         self.history: list[float] = []
         self.violations: list[float] = []
+        self.refinements: list[int] = []
         self.last: Iterate | None = None
         self._generator: Iterator[Iterate] | None = None
         self._seconds = 0.0
@@ -246,6 +251,7 @@ class Candidate:
                 self.last = it
                 self.history.append(it.cost)
                 self.violations.append(it.constraint_violation)
+                self.refinements.append(attempt)
                 yield it
         finally:
             solver.close()
@@ -309,6 +315,7 @@ class Candidate:
             constraint_violation=last.constraint_violation if last else np.nan,
             cost_history=tuple(self.history),
             violation_history=tuple(self.violations),
+            refinement_history=tuple(self.refinements),
             verification=verification,
             substeps=problem.substeps,
             cost_bound=problem.cost_bound,

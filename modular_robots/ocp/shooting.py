@@ -127,10 +127,13 @@ class ShootingProblem:
                 if self.collision.min_distance(q) < 0.0:
                     raise ValueError(f"{label} is in collision with an obstacle")
         N = self.intervals
-        #: A lower bound of the cost [s]: for ``time``, no plan within the velocity limits is faster
-        #: than the busiest joint moving at its limit all the way (``RobotModel.travel_time_bound``);
+        #: A lower bound of the cost [s], valid by construction: for ``time``, no plan within its
+        #: velocity bounds is faster than the busiest joint moving at its bound all the way
+        #: (``RobotModel.travel_time_bound``);
         #: 0 for ``effort``. Used by step D to prune a candidate before it is solved.
-        self.cost_bound = robot.travel_time_bound(self.q_start, self.q_goal) if cost == "time" else 0.0
+        self.cost_bound = (
+            robot.travel_time_bound(self.q_start, self.q_goal, self.velocity_bound) if cost == "time" else 0.0
+        )
         self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
         self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
 
