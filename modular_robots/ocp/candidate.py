@@ -111,6 +111,9 @@ class CandidateResult:
     cost_bound: float = 0.0
     composition: str = ""
     boundary_pair: BoundaryPair = BoundaryPair.FASTEST
+    #: The rest configurations it moves between [rad | m] (empty if it never started).
+    q_start: tuple[float, ...] = ()
+    q_goal: tuple[float, ...] = ()
     y: np.ndarray | None = field(default=None, repr=False, compare=False)
     waypoints: np.ndarray | None = field(default=None, repr=False, compare=False)
     trajectory: Trajectory | None = field(default=None, repr=False, compare=False)
@@ -129,6 +132,8 @@ class CandidateResult:
             "candidate": self.name,
             "boundary_pair": str(self.boundary_pair),
             "dof": self.dof,
+            "q_start": list(self.q_start),
+            "q_goal": list(self.q_goal),
             "status": str(self.status),
             "reason": self.reason,
             "iterations": self.iterations,
@@ -321,6 +326,8 @@ class Candidate:
             cost_bound=problem.cost_bound,
             composition=self.composition,
             boundary_pair=self.boundary_pair,
+            q_start=tuple(float(v) for v in problem.q_start),
+            q_goal=tuple(float(v) for v in problem.q_goal),
             y=last.y if last else None,
             waypoints=problem.waypoints,
             trajectory=sample_trajectory(problem, last.y) if optimal else None,

@@ -1,0 +1,156 @@
+"""Step D on a scenario suite nobody tuned for (``benchmarks/scenarios``, made by
+``benchmarks/suite.py``): every scenario with brute force (rule ``none``), the paper's rule as
+printed (``paper``) and the default guarded rule (``ratio``). Per scenario: iterations and wall time
+of each, the savings, the hindsight floor, whether the pruned winner is the brute-force winner;
+per candidate, its lower bound beside its optimum (``tests/test_suite.py`` checks bound <=
+optimum on every one).
+
+Brute-force histories are kept in ``benchmarks/results/histories/`` (not committed) so that rules
+can be replayed on them (:mod:`benchmarks._replay`) without solving again::
+
+    python -m benchmarks suite            # every scenario of the suite
+    python -m benchmarks.bench_suite s1   # only the seed-1 (tuning) scenarios
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from modular_robots import load_scenario
+from modular_robots.ocp.candidate import CandidateResult, CandidateStatus
+from modular_robots.pipeline import run_scenario, with_pruning
+
+from ._common import RESULTS, table, write
+from .suite import SUITE
+
+HISTORIES = RESULTS / "histories"
+RULES = ("paper", "ratio")
+#: Two optima within this relative difference are the same winner.
+SAME = 1e-6
+
+
+def _store(name: str, run) -> None:
+    HISTORIES.mkdir(parents=True, exist_ok=True)
+    rows = [r.to_json() for r in run.candidates]
+    (HISTORIES / f"{name}.json").write_text(json.dumps({"candidates": rows, "winner": run.winner.name}))
+
+
+def load_histories(name: str) -> list[CandidateResult]:
+    """The brute-force results of suite scenario ``name``, as stored by this benchmark."""
+    document = json.loads((HISTORIES / f"{name}.json").read_text())
+    out = []
+    for c in document["candidates"]:
+        out.append(
+            CandidateResult(
+                name=c["candidate"],
+                dof=c["dof"],
+                status=CandidateStatus(c["status"]),
+                reason=c["reason"],
+                iterations=c["iterations"],
+                cost=np.nan if c["cost"] is None else c["cost"],
+                tf=np.nan if c["tf"] is None else c["tf"],
+                cost_history=tuple(np.nan if v is None else v for v in c["cost_history"]),
+                violation_history=tuple(np.inf if v is None else v for v in c["violation_history"]),
+                refinement_history=tuple(c.get("refinement_history", ())),
+                cost_bound=c["cost_bound"] or 0.0,
+                composition=c["composition"],
+            )
+        )
+    return out
+
+
+def hindsight(results, threshold: float = 0.5, start_iteration: int = 2) -> int:
+    """The fewest iterations of any rule that keeps every candidate ending within ``threshold`` of
+    the winner (the others stopped at ``start_iteration``)."""
+    best = min(r.cost for r in results if r.status == CandidateStatus.OPTIMAL)
+    kept = [r for r in results if r.status == CandidateStatus.OPTIMAL and r.cost <= (1.0 + threshold) * best]
+    return sum(r.iterations for r in kept) + sum(min(start_iteration, r.iterations) for r in results if r not in kept)
+
+
+def _winner(run) -> tuple[str, float]:
+    return run.winner.name, run.winner.cost
+
+
+def run_one(path: Path) -> dict:
+    scenario = load_scenario(path)
+    start = time.perf_counter()
+    brute = run_scenario(with_pruning(scenario, "none"))
+    brute_wall = time.perf_counter() - start
+    _store(scenario.name, brute)
+    truth, truth_cost = _winner(brute)
+    row = {
+        "scenario": scenario.name,
+        "payload_kg": scenario.task.payload,
+        "compositions": len(brute.feasibility.survivors),
+        "candidates": len(brute.candidates),
+        "winner": truth,
+        "winner_cost": truth_cost,
+        "iterations_none": brute.iterations,
+        "wall_none_s": brute.seconds["optimization"],
+        "hindsight_x": brute.iterations / hindsight(brute.candidates),
+    }
+    for rule in RULES:
+        run = run_scenario(with_pruning(scenario, rule))
+        name, cost = _winner(run)
+        pruned = [c for c in run.candidates if c.status == CandidateStatus.PRUNED]
+        row.update(
+            {
+                f"winner_{rule}": name,
+                f"same_winner_{rule}": name == truth and abs(cost - truth_cost) <= SAME * truth_cost,
+                f"iterations_{rule}": run.iterations,
+                f"saving_{rule}_x": brute.iterations / run.iterations,
+                f"wall_{rule}_s": run.seconds["optimization"],
+                f"wall_saving_{rule}_x": brute.seconds["optimization"] / run.seconds["optimization"],
+                f"pruned_{rule}": len(pruned),
+                f"pruned_by_bound_{rule}": sum("by the bound" in c.reason for c in pruned),
+                f"dropped_before_first_iteration_{rule}": sum(c.iterations == 0 for c in pruned),
+            }
+        )
+    bounds = [
+        {
+            "scenario": scenario.name,
+            "candidate": c.name,
+            "status": str(c.status),
+            "composition": c.composition,
+            "q_start": list(c.q_start),
+            "q_goal": list(c.q_goal),
+            "cost_bound": c.cost_bound,
+            "cost": c.cost if c.status == CandidateStatus.OPTIMAL else None,
+        }
+        for c in brute.candidates
+    ]
+    print(table([row]), f"(brute force {brute_wall:.0f} s)", flush=True)
+    return {"row": row, "bounds": bounds}
+
+
+def main(prefix: str = "") -> None:
+    paths = sorted(SUITE.glob(f"{prefix}*.yaml"))
+    results = [run_one(path) for path in paths]
+    rows = [r["row"] for r in results]
+    summary = {}
+    for rule in RULES:
+        savings = [r[f"saving_{rule}_x"] for r in rows]
+        walls = [r[f"wall_saving_{rule}_x"] for r in rows]
+        summary[rule] = {
+            "same_winner": sum(r[f"same_winner_{rule}"] for r in rows),
+            "scenarios": len(rows),
+            "median_saving_x": float(np.median(savings)),
+            "min_saving_x": float(np.min(savings)),
+            "median_wall_saving_x": float(np.median(walls)),
+            "dropped_before_first_iteration": sum(r[f"dropped_before_first_iteration_{rule}"] for r in rows),
+            "pruned_by_bound": sum(r[f"pruned_by_bound_{rule}"] for r in rows),
+        }
+    print(table(rows))
+    print(json.dumps(summary, indent=1))
+    name = "suite" if not prefix else f"suite-{prefix}"
+    path = write(name, rows, {"summary": summary, "bounds": [b for r in results for b in r["bounds"]]})
+    print(f"-> {path}")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:2])
