@@ -7,15 +7,12 @@ from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from modular_robots import load_scenario
-from modular_robots.ocp.candidate import CandidateStatus
-from modular_robots.ocp.solver import Iterate
 from modular_robots.pipeline import run_scenario, with_pruning
 from modular_robots.pruning import PruningManager
 
 from ._common import table, write
+from ._replay import ReplayExecutor
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 NAMES = ("paper-5kg", "low-10kg", "reach-4dof")
@@ -49,47 +46,6 @@ THRESHOLDS = (0.5, 1.0, 1.5, 2.0)
 GUARDS = {"bare": {"window": 0, "patience": 0}, "default": {}, "default, no cost bound": {}}
 
 
-class _Replay:
-    """An executor that replays brute-force histories: a candidate's trajectory does not depend
-    on who else is pruned, so the real PruningManager on these gives the rule's decisions for any
-    threshold without solving again (refinement phases are not marked in the histories, so they
-    are judged like first solves: slightly more pruning than a live run)."""
-
-    def __init__(self, results, bounds: bool = True):
-        self.results = {r.name: r if bounds else replace(r, cost_bound=0.0) for r in results}
-        self.step = {r.name: 0 for r in results}
-
-    def names(self):
-        return list(self.results)
-
-    def advance(self, names):
-        out = {}
-        for name in names:
-            r, k = self.results[name], self.step[name]
-            if k < len(r.cost_history):
-                self.step[name] = k + 1
-                out[name] = (
-                    False,
-                    Iterate(
-                        k + 1,
-                        r.cost_history[k],
-                        r.violation_history[k],
-                        r.cost_history[k],
-                        np.empty(0),
-                        cost_bound=r.cost_bound,
-                    ),
-                )
-            else:
-                out[name] = (True, r)
-        return out
-
-    def stop(self, names):
-        return {n: replace(self.results[n], status=CandidateStatus.STOPPED, iterations=self.step[n]) for n in names}
-
-    def shutdown(self):
-        pass
-
-
 def hindsight(brute, threshold: float, start_iteration: int) -> dict:
     """The fewest iterations of a rule that never prunes a candidate ending within ``threshold``
     of the winner: with hindsight, every other candidate is pruned at ``start_iteration`` and
@@ -120,7 +76,7 @@ def replay(brute, scenario) -> list[dict]:
     for guard, overrides in GUARDS.items():
         for threshold in THRESHOLDS:
             settings = replace(scenario.pruning, rule="ratio", threshold=threshold, **overrides)
-            results = PruningManager(_Replay(brute.candidates, "no cost bound" not in guard), settings).run()
+            results = PruningManager(ReplayExecutor(brute.candidates, "no cost bound" not in guard), settings).run()
             used = sum(r.iterations if r.status != "pruned" else r.pruned_at_iteration for r in results)
             optimal = [r for r in results if r.status == "optimal"]
             winner = min(optimal, key=lambda r: (r.cost, r.name)).name

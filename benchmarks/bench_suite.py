@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from modular_robots import load_scenario
+from modular_robots import InfeasibleError, load_scenario
 from modular_robots.ocp.candidate import CandidateResult, CandidateStatus
 from modular_robots.pipeline import run_scenario, with_pruning
 
@@ -95,7 +95,11 @@ def run_one(path: Path) -> dict:
         "hindsight_x": brute.iterations / hindsight(brute.candidates),
     }
     for rule in RULES:
-        run = run_scenario(with_pruning(scenario, rule))
+        try:
+            run = run_scenario(with_pruning(scenario, rule))
+        except InfeasibleError as exc:  # the rule pruned every candidate that would have verified
+            row.update({f"winner_{rule}": None, f"same_winner_{rule}": False, f"error_{rule}": str(exc)[:300]})
+            continue
         name, cost = _winner(run)
         pruned = [c for c in run.candidates if c.status == CandidateStatus.PRUNED]
         row.update(
@@ -134,16 +138,16 @@ def main(prefix: str = "") -> None:
     rows = [r["row"] for r in results]
     summary = {}
     for rule in RULES:
-        savings = [r[f"saving_{rule}_x"] for r in rows]
-        walls = [r[f"wall_saving_{rule}_x"] for r in rows]
+        savings = [r.get(f"saving_{rule}_x", np.nan) for r in rows]
+        walls = [r.get(f"wall_saving_{rule}_x", np.nan) for r in rows]
         summary[rule] = {
             "same_winner": sum(r[f"same_winner_{rule}"] for r in rows),
             "scenarios": len(rows),
-            "median_saving_x": float(np.median(savings)),
-            "min_saving_x": float(np.min(savings)),
-            "median_wall_saving_x": float(np.median(walls)),
-            "dropped_before_first_iteration": sum(r[f"dropped_before_first_iteration_{rule}"] for r in rows),
-            "pruned_by_bound": sum(r[f"pruned_by_bound_{rule}"] for r in rows),
+            "median_saving_x": float(np.nanmedian(savings)),
+            "min_saving_x": float(np.nanmin(savings)),
+            "median_wall_saving_x": float(np.nanmedian(walls)),
+            "dropped_before_first_iteration": sum(r.get(f"dropped_before_first_iteration_{rule}", 0) for r in rows),
+            "pruned_by_bound": sum(r.get(f"pruned_by_bound_{rule}", 0) for r in rows),
         }
     print(table(rows))
     print(json.dumps(summary, indent=1))
