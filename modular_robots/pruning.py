@@ -126,7 +126,8 @@ def ratio_rule(
     """
     if view.iteration < settings.start_iteration:
         return {}
-    reference = reference_cost(view.costs, view.violations, view.converged, guard_violation)
+    live = view.costs if settings.reference == "trusted" else {}
+    reference = reference_cost(live, view.violations, view.converged, guard_violation)
     if reference is None or reference <= 0.0:
         return {}
 

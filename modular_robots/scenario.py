@@ -14,6 +14,7 @@ __all__ = ["SphereObstacle", "Task", "OptimizerSettings", "PruningSettings", "Sc
 
 COSTS = ("time", "effort")
 RULES = ("ratio", "paper", "none")
+REFERENCES = ("trusted", "verified")
 TRANSCRIPTIONS = ("forward", "inverse")
 
 
@@ -79,6 +80,9 @@ class PruningSettings:
     window: int = 8
     lookahead: float = 2.0
     patience: int = 75
+    #: What the ratio is taken against: ``trusted`` (the best trusted iterate or verified cost) or
+    #: ``verified`` (the best verified cost only).
+    reference: str = "trusted"
 
 
 @dataclass(frozen=True)
@@ -180,6 +184,7 @@ def _read_pruning(f: Fields | None) -> PruningSettings:
         window=f.integer("window", default=d.window, minimum=0),
         lookahead=f.number("lookahead", default=d.lookahead, minimum=0.0),
         patience=f.integer("patience", default=d.patience, minimum=0),
+        reference=f.string("reference", default=d.reference, choices=REFERENCES),
     )
     f.done()
     return settings

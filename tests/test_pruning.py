@@ -849,6 +849,7 @@ def test_small_result_json(small_run_1):
         "window": 8,
         "lookahead": 2.0,
         "patience": 75,
+        "reference": "trusted",
     }
     counts = doc["counts"]
     assert counts["enumerated"] == 516 and counts["feasible"] == 6 and counts["optimized"] == 6
