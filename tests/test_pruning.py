@@ -181,15 +181,27 @@ def ratio_rule(
     untrusted_for=None,
     patience=0,
     floors=None,
+    reference="trusted",
+    gate=0.0,
 ):
     """The rule on one round's figures, with the settings spelt out (0 turns a guard part off)."""
     view = RoundCosts(iteration, costs, violations, converged, earlier, untrusted_for or {}, floors or {})
-    settings = PruningSettings("ratio", threshold, start_iteration, window=0, lookahead=lookahead, patience=patience)
+    settings = PruningSettings(
+        "ratio",
+        threshold,
+        start_iteration,
+        window=0,
+        lookahead=lookahead,
+        patience=patience,
+        reference=reference,
+        gate=gate,
+    )
     return set(_ratio_rule(view, settings, guard_violation))
 
 
-#: The ratio rule without the guard's progress window and patience (scripts are short).
-BARE = {"window": 0, "lookahead": 0.0, "patience": 0}
+#: The ratio rule without the guard's progress window, patience and bound gate, against the best
+#: trusted cost (scripts are short; the defaults are tested on their own below).
+BARE = {"window": 0, "lookahead": 0.0, "patience": 0, "reference": "trusted", "gate": 0.0}
 
 
 def make_executor(scripts, jobs=1, log=None):
@@ -215,7 +227,16 @@ def summary(results) -> list[tuple]:
 
 
 def expected_outcome(
-    scripts, rule, threshold, start_iteration, guard=GUARD_VIOLATION, window=0, lookahead=0.0, patience=0
+    scripts,
+    rule,
+    threshold,
+    start_iteration,
+    guard=GUARD_VIOLATION,
+    window=0,
+    lookahead=0.0,
+    patience=0,
+    reference="trusted",
+    gate=0.0,
 ) -> dict:
     """An independent re-statement of SPEC §6 with the documented guard, its progress window and
     its patience: name -> (status, iterations, pruned_at_iteration)."""
@@ -250,7 +271,8 @@ def expected_outcome(
             now = {
                 n: (by_name[n].costs[round_ - 1], by_name[n].violation(round_ - 1)) for n in alive if not refining(n)
             }
-            trusted = [c for c, v in now.values() if v <= guard] + list(converged.values())
+            trusted = [c for c, v in now.values() if v <= guard and reference == "trusted"]
+            trusted += list(converged.values())
             if trusted and min(trusted) > 0:
                 ref = min(trusted)
                 for n in alive:  # the cost bound, and a re-solve's previous optimum, bound the final cost
@@ -260,6 +282,8 @@ def expected_outcome(
                     if (floor - ref) / ref > threshold:
                         out[n] = ("pruned", round_, round_)
                 for n, (c, v) in now.items():
+                    if by_name[n].bound < gate * ref:  # a bound that could still win: judged on it only
+                        continue
                     if v > guard:
                         if patience and untrusted_run(n, round_) >= patience:
                             out[n] = ("pruned", round_, round_)
@@ -552,10 +576,33 @@ def test_candidate_without_iterates():
     assert results["c"].status == "optimal" and progress[0].finished == ("a", "b")
 
 
+def test_the_defaults_keep_a_slow_winner_that_the_trusted_reference_prunes():
+    """The suite's hard case in miniature: ``slow`` is trusted at three times its final cost for
+    its first iterations while ``quick`` converges at once, and ends below it. Against the best
+    trusted cost and without a gate it is pruned at once; under the defaults (the best verified
+    cost as the reference, and the gate: its bound 1.2 s is below 0.7 x 2.0 s) it is kept and
+    wins, while ``hopeless``, whose bound 1.5 s passes the gate, is pruned on its trusted cost once
+    ``quick`` has verified, and ``beyond``, whose bound exceeds the verified cost, by its bound."""
+    scripts = [
+        Script("quick", (2.4, 2.1, 2.0), end="optimal", final_cost=2.0, bound=1.0),
+        Script("slow", (6.0, 5.9, 5.6, 5.0, 4.0, 3.0, 2.2, 1.8), end="optimal", final_cost=1.8, bound=1.2),
+        Script("hopeless", (5.0,) * 8, end="optimal", bound=1.5),
+        Script("beyond", (9.0,) * 8, violations=(1.0,) * 8, end="optimal", bound=2.1),
+    ]
+    old, _ = run_fakes(scripts, "ratio", **BARE)
+    assert old["slow"].status == "pruned"
+    new, _ = run_fakes(scripts, "ratio", window=0, lookahead=0.0, patience=0, reference="verified", gate=0.7)
+    assert new["slow"].status == "optimal" and new["slow"].cost == 1.8
+    assert new["hopeless"].status == "pruned" and new["hopeless"].pruned_at_iteration == 4
+    assert "ratio rule: trusted cost 5 is 2.50x the reference 2" in new["hopeless"].reason
+    assert new["beyond"].status == "pruned" and new["beyond"].pruned_at_iteration == 4
+    assert "by the bound: no motion of it is faster than 2.1, above the best verified cost 2" in new["beyond"].reason
+
+
 def test_random_scripts_match_the_rule_statement():
     rng = np.random.default_rng(20240506)
     decided_by_bounds = 0
-    for trial in range(120):
+    for trial in range(240):
         scripts = random_scripts(rng, int(rng.integers(1, 7)))
         threshold = float(rng.choice([0.2, 0.5, 1.0]))
         start = int(rng.integers(1, 4))
@@ -564,6 +611,8 @@ def test_random_scripts_match_the_rule_statement():
             "window": int(rng.choice([0, 1, 3])),
             "lookahead": float(rng.choice([0.0, 1.0, 4.0])),
             "patience": int(rng.choice([0, 2, 4])),
+            "reference": str(rng.choice(["trusted", "verified"])),
+            "gate": float(rng.choice([0.0, 0.7, 1.5])),
         }
         results, progress = run_fakes(scripts, rule, threshold, start, **guard)
         expected = expected_outcome(scripts, rule, threshold, start, **guard)
@@ -849,7 +898,8 @@ def test_small_result_json(small_run_1):
         "window": 8,
         "lookahead": 2.0,
         "patience": 75,
-        "reference": "trusted",
+        "reference": "verified",
+        "gate": 0.7,
     }
     counts = doc["counts"]
     assert counts["enumerated"] == 516 and counts["feasible"] == 6 and counts["optimized"] == 6
