@@ -61,7 +61,8 @@ def replay(results: list[CandidateResult], settings: PruningSettings, bounds: bo
     """The outcome of ``settings`` on recorded ``results``: iterations used, the winner, whether it
     is the recorded winner, how many were pruned, and the pruned candidates' names with reasons."""
     truth = min((r for r in results if r.status == CandidateStatus.OPTIMAL), key=lambda r: (r.cost, r.name))
-    out = PruningManager(ReplayExecutor(results, bounds), settings).run()
+    known = {r.name: r.cost_bound for r in results} if bounds else {}
+    out = PruningManager(ReplayExecutor(results, bounds), settings, bounds=known).run()
     used = sum(r.pruned_at_iteration if r.status == CandidateStatus.PRUNED else r.iterations for r in out)
     optimal = [r for r in out if r.status == CandidateStatus.OPTIMAL]
     winner = min(optimal, key=lambda r: (r.cost, r.name)) if optimal else None

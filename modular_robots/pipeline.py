@@ -25,10 +25,18 @@ from .ocp.solver import Iterate
 from .ocp.tracking import Tracking, track
 from .pruning import Progress, PruningManager
 from .recorder import RunRecorder
-from .robot import robot_from_urdf
+from .robot import robot_from_urdf, robot_model
 from .scenario import Scenario
 
-__all__ = ["RunResult", "candidate_specs", "optimize_composition", "run_scenario", "track_winner", "with_pruning"]
+__all__ = [
+    "RunResult",
+    "candidate_specs",
+    "cost_bound",
+    "optimize_composition",
+    "run_scenario",
+    "track_winner",
+    "with_pruning",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -58,6 +66,16 @@ def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
         yield CandidateSpec(verdict.composition, verdict.q_start, verdict.q_goal, BoundaryPair.FASTEST)
         if verdict.clear_pair is not None:
             yield CandidateSpec(verdict.composition, *verdict.clear_pair, BoundaryPair.CLEAR)
+
+
+def cost_bound(scenario: Scenario, spec: CandidateSpec) -> float:
+    """The lower bound on ``spec``'s optimal cost before it is optimised, the one its problem will
+    have (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`): for ``time``, its
+    busiest joint at the plan's velocity bound all the way; 0 for ``effort``."""
+    if scenario.task.cost != "time":
+        return 0.0
+    robot = robot_model(spec.composition, scenario.catalog, scenario.task.payload)
+    return robot.travel_time_bound(spec.q_start, spec.q_goal, scenario.optimizer.velocity_margin * robot.velocity_limit)
 
 
 def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
@@ -112,10 +130,12 @@ def run_scenario(
             raise InfeasibleError(summary.diagnosis())
 
         survivors = sorted(summary.survivors, key=lambda v: (v.time_bound, v.composition.name))
-        specs = list(candidate_specs(survivors))
-        manager = PruningManager(
-            make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs), scenario.pruning
-        )
+        bounds = {spec.name: cost_bound(scenario, spec) for spec in candidate_specs(survivors)}
+        # in the order of their bounds: the order they are admitted in, and (round robin) the
+        # workers' shares, so that the candidates iterating together are spread over the workers
+        specs = sorted(candidate_specs(survivors), key=lambda spec: (bounds[spec.name], spec.name))
+        executor = make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs)
+        manager = PruningManager(executor, scenario.pruning, bounds=bounds)
         recorder.update(counts={"optimized": len(survivors), "candidates": len(specs)})
         optimization_start = time.perf_counter()
         rounds = 0

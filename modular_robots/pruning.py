@@ -240,15 +240,24 @@ class PruningManager:
     untrusted_for: dict[str, int] = field(default_factory=dict)
     #: Per candidate re-solving after a failed verification: the cost its previous solve reached.
     floor: dict[str, float] = field(default_factory=dict)
+    #: Lower bounds of the candidates' costs known before they start (for admission by bound).
+    bounds: Mapping[str, float] = field(default_factory=dict)
 
     def rounds(self) -> Iterator[Progress]:
         order = self.executor.names()
-        alive = list(order)
+        admit = self.settings.admission if self.settings.rule == "ratio" else 0
+        # With admission, candidates enter the lockstep in the order of their lower bounds, at
+        # most ``admit`` at a time, so that a verified cost can drop the others before they start.
+        waiting = deque(sorted(order, key=lambda n: self.bounds.get(n, 0.0)) if admit else [])
+        alive = [] if admit else list(order)
         converged: dict[str, float] = {}
         round_ = 0
         try:
-            while alive:
+            while True:
                 round_ += 1
+                dropped = self._admit(alive, waiting, admit, converged)
+                if not alive:
+                    break
                 stepped = self.executor.advance(alive)
                 finished = []
                 for name in alive:
@@ -260,13 +269,14 @@ class PruningManager:
                             converged[name] = value.cost
                     else:
                         self._remember(name, value)
-                alive = [n for n in alive if n not in self.results]
+                alive[:] = [n for n in alive if n not in self.results]
                 reasons = self._prune(alive, converged, round_)
                 pruned = [n for n in alive if n in reasons]
                 if pruned:
                     for name, result in self._stop(pruned).items():
-                        self.results[name] = result.pruned(round_, reasons[name])
-                    alive = [n for n in alive if n not in reasons]
+                        own = self.last[name].iteration if name in self.last else 0
+                        self.results[name] = result.pruned(own, reasons[name])
+                    alive[:] = [n for n in alive if n not in reasons]
                 best = reference_cost(
                     {n: self.last[n].cost for n in alive if n in self.last},
                     {n: self.last[n].constraint_violation for n in alive if n in self.last},
@@ -275,9 +285,9 @@ class PruningManager:
                 )
                 yield Progress(
                     round_,
-                    len(alive),
+                    len(alive) + len(waiting),
                     best,
-                    tuple(sorted(pruned)),
+                    tuple(sorted(pruned + dropped)),
                     tuple(finished),
                     min(converged.values()) if converged else None,
                 )
@@ -290,7 +300,24 @@ class PruningManager:
                 logger.debug("stopping the live candidates failed", exc_info=True)
             finally:
                 self.executor.shutdown()
+            for name in waiting:
+                self.results.setdefault(name, CandidateResult.never_started(name))
         self.results = {name: self.results[name] for name in order}
+
+    def _admit(self, alive: list[str], waiting: deque, admit: int, converged: dict[str, float]) -> list[str]:
+        """Move waiting candidates into ``alive`` up to ``admit`` live ones; one whose bound
+        already exceeds the best verified cost is dropped before its first iteration. Returns
+        the dropped names."""
+        dropped = []
+        while waiting and len(alive) < admit:
+            name = waiting.popleft()
+            reason = bound_rule({name: self.bounds.get(name, 0.0)}, converged).get(name)
+            if reason is None:
+                alive.append(name)
+            else:
+                self.results[name] = CandidateResult.never_started(name).pruned(0, reason)
+                dropped.append(name)
+        return dropped
 
     def run(self) -> list[CandidateResult]:
         for _ in self.rounds():

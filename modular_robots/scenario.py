@@ -88,6 +88,9 @@ class PruningSettings:
     #: A candidate whose lower bound is below ``gate`` times the reference is judged on its bound
     #: only, never on its iterates (0: every candidate is judged on its iterates).
     gate: float = 0.7
+    #: At most this many candidates iterate at once, admitted in the order of their lower bounds
+    #: (0: all at once, the paper's lockstep).
+    admission: int = 8
 
 
 @dataclass(frozen=True)
@@ -191,6 +194,7 @@ def _read_pruning(f: Fields | None) -> PruningSettings:
         patience=f.integer("patience", default=d.patience, minimum=0),
         reference=f.string("reference", default=d.reference, choices=REFERENCES),
         gate=f.number("gate", default=d.gate, minimum=0.0),
+        admission=f.integer("admission", default=d.admission, minimum=0),
     )
     f.done()
     return settings

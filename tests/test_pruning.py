@@ -201,7 +201,7 @@ def ratio_rule(
 
 #: The ratio rule without the guard's progress window, patience and bound gate, against the best
 #: trusted cost (scripts are short; the defaults are tested on their own below).
-BARE = {"window": 0, "lookahead": 0.0, "patience": 0, "reference": "trusted", "gate": 0.0}
+BARE = {"window": 0, "lookahead": 0.0, "patience": 0, "reference": "trusted", "gate": 0.0, "admission": 0}
 
 
 def make_executor(scripts, jobs=1, log=None):
@@ -599,6 +599,38 @@ def test_the_defaults_keep_a_slow_winner_that_the_trusted_reference_prunes():
     assert "by the bound: no motion of it is faster than 2.1, above the best verified cost 2" in new["beyond"].reason
 
 
+def test_admission_by_bound_drops_a_candidate_before_its_first_iteration():
+    """With ``admission`` 1 the candidates iterate one at a time in the order of their bounds:
+    ``a`` (bound 1.0) verifies at 1.5, ``b`` (1.2) runs next and verifies at 1.3, and ``c``
+    (bound 2.0, above both) is dropped without a single iteration, saying why; all at once
+    (admission 0), ``c`` would have run from the first round."""
+    scripts = [
+        Script("c", (3.0,) * 5, end="optimal", bound=2.0),
+        Script("b", (2.0, 1.6, 1.3), end="optimal", bound=1.2),
+        Script("a", (1.8, 1.5), end="optimal", bound=1.0),
+    ]
+    log = []
+    settings = PruningSettings("ratio", **{**BARE, "admission": 1})
+    bounds = {s.name: s.bound for s in scripts}
+    manager = PruningManager(RecordingExecutor(make_executor(scripts, 1), log), settings, bounds=bounds)
+    results = {r.name: r for r in manager.run()}
+    advanced = [names for entry in log if entry[0] == "advance" for names in entry[1]]
+    assert advanced == ["a"] * 3 + ["b"] * 4  # one at a time, by bound; each next() that ends it counts
+    assert (results["a"].status, results["a"].cost, results["b"].status, results["b"].cost) == (
+        "optimal",
+        1.5,
+        "optimal",
+        1.3,
+    )
+    c = results["c"]
+    assert (c.status, c.iterations, c.pruned_at_iteration) == ("pruned", 0, 0)
+    assert c.reason == (
+        "pruned at iteration 0 by the bound: no motion of it is faster than 2, above the best verified cost 1.3"
+    )
+    everyone, _ = run_fakes(scripts, "ratio", **BARE)
+    assert everyone["c"].iterations > 0
+
+
 def test_random_scripts_match_the_rule_statement():
     rng = np.random.default_rng(20240506)
     decided_by_bounds = 0
@@ -900,6 +932,7 @@ def test_small_result_json(small_run_1):
         "patience": 75,
         "reference": "verified",
         "gate": 0.7,
+        "admission": 8,
     }
     counts = doc["counts"]
     assert counts["enumerated"] == 516 and counts["feasible"] == 6 and counts["optimized"] == 6
