@@ -16,6 +16,10 @@ moving at its bound all the way
 (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`; 0 for the ``effort`` cost). A
 candidate whose bound exceeds the best *verified* cost can never win, and is dropped.
 
+**Admission by bound.** Candidates enter the lockstep in the order of their lower bounds, at most
+``admission`` (8) at a time, so that the likely winners verify early; a candidate admitted after a
+verified cost exists and whose bound exceeds it is dropped before its first iteration.
+
 **The guard.** A cost read at an infeasible iterate can be far too low (a minimum-time iterate
 that still cuts through an obstacle or breaks continuity is "fast"), and a feasible iterate's
 cost can be several times the candidate's optimum (trust-constr lengthens ``tf`` while it
