@@ -9,10 +9,9 @@ from pathlib import Path
 
 from modular_robots import load_scenario
 from modular_robots.pipeline import run_scenario, with_pruning
-from modular_robots.pruning import PruningManager
 
 from ._common import table, write
-from ._replay import ReplayExecutor
+from ._replay import replay
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 NAMES = ("paper-5kg", "low-10kg", "reach-4dof")
@@ -41,9 +40,16 @@ def _summary(result) -> dict:
 
 
 THRESHOLDS = (0.5, 1.0, 1.5, 2.0)
-#: The guard's progress window and patience off (the bare rule) and at the defaults; and the
-#: defaults without the candidates' cost bounds (what the bound adds).
-GUARDS = {"bare": {"window": 0, "patience": 0}, "default": {}, "default, no cost bound": {}}
+#: The paper's rule as printed; the previous default (trusted reference, no gate, all candidates
+#: at once); the default without admission; the default; and the default without the
+#: candidates' cost bounds (what the bounds add).
+GUARDS = {
+    "paper": {"rule": "paper"},
+    "previous default": {"reference": "trusted", "gate": 0.0, "admission": 0},
+    "default, all at once": {"admission": 0},
+    "default": {},
+    "default, no cost bound": {},
+}
 
 
 def hindsight(brute, threshold: float, start_iteration: int) -> dict:
@@ -66,28 +72,23 @@ def hindsight(brute, threshold: float, start_iteration: int) -> dict:
     }
 
 
-def replay(brute, scenario) -> list[dict]:
+def replays(brute, scenario) -> list[dict]:
     """The ratio rule at several thresholds, bare and with the default guard, replayed on the
     brute-force histories; and the hindsight floor of a rule that keeps every candidate ending
     within the threshold."""
-    truth = brute.winner.name
-    total = sum(len(r.cost_history) for r in brute.candidates)
     rows = [hindsight(brute, threshold, scenario.pruning.start_iteration) for threshold in THRESHOLDS]
     for guard, overrides in GUARDS.items():
         for threshold in THRESHOLDS:
-            settings = replace(scenario.pruning, rule="ratio", threshold=threshold, **overrides)
-            results = PruningManager(ReplayExecutor(brute.candidates, "no cost bound" not in guard), settings).run()
-            used = sum(r.iterations if r.status != "pruned" else r.pruned_at_iteration for r in results)
-            optimal = [r for r in results if r.status == "optimal"]
-            winner = min(optimal, key=lambda r: (r.cost, r.name)).name
+            settings = replace(scenario.pruning, **{"rule": "ratio", "threshold": threshold, **overrides})
+            outcome = replay(brute.candidates, settings, bounds="no cost bound" not in guard)
             rows.append(
                 {
                     "guard": guard,
                     "threshold": threshold,
-                    "iterations": used,
-                    "saving_x": total / used,
-                    "same_winner": winner == truth,
-                    "pruned": sum(r.status == "pruned" for r in results),
+                    "iterations": outcome["iterations"],
+                    "saving_x": outcome["saving_x"],
+                    "same_winner": outcome["same_winner"],
+                    "pruned": len(outcome["pruned"]),
                 }
             )
     return rows
@@ -100,7 +101,7 @@ def main() -> None:
         ratio = _summary(run_scenario(with_pruning(scenario, "ratio")))
         brute_run = run_scenario(with_pruning(scenario, "none"))
         brute = _summary(brute_run)
-        details[name] = {"ratio": ratio, "none": brute, "replayed_thresholds": replay(brute_run, scenario)}
+        details[name] = {"ratio": ratio, "none": brute, "replayed_thresholds": replays(brute_run, scenario)}
         print(table(details[name]["replayed_thresholds"]))
         rows.append(
             {
