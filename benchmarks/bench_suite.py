@@ -172,7 +172,13 @@ def main(prefix: str = "", reuse: bool = False) -> None:
     """Run the suite's scenarios whose names start with ``prefix``; ``reuse`` the stored
     brute-force histories where they exist (``python -m benchmarks.bench_suite s1 reuse``)."""
     paths = sorted(SUITE.glob(f"{prefix}*.yaml"))
-    results = [run_one(path, reuse) for path in paths]
+    results = []
+    for path in paths:  # written after every scenario, so an interrupted suite keeps what it measured
+        results.append(run_one(path, reuse))
+        _write(prefix, results)
+
+
+def _write(prefix: str, results: list[dict]) -> None:
     rows = [r["row"] for r in results]
     summary = {}
     for rule in RULES:
@@ -187,11 +193,9 @@ def main(prefix: str = "", reuse: bool = False) -> None:
             "dropped_before_first_iteration": sum(r.get(f"dropped_before_first_iteration_{rule}", 0) for r in rows),
             "pruned_by_bound": sum(r.get(f"pruned_by_bound_{rule}", 0) for r in rows),
         }
-    print(table(rows))
-    print(json.dumps(summary, indent=1))
     name = "suite" if not prefix else f"suite-{prefix}"
     path = write(name, rows, {"summary": summary, "bounds": [b for r in results for b in r["bounds"]]})
-    print(f"-> {path}")
+    print(f"-> {path} ({len(rows)} scenarios)", flush=True)
 
 
 if __name__ == "__main__":
