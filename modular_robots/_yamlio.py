@@ -7,15 +7,20 @@ error names the file, the line, the key path and what was expected.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from .exceptions import InputError
+from .exceptions import InputError, shorten
 
 _MISSING = object()
+#: The largest magnitude a number may have (SI units): beyond it, products overflow.
+MAX_MAGNITUDE = 1e9
+#: The largest file read as a scenario or catalogue [bytes].
+MAX_FILE_BYTES = 10_000_000
 
 
 class _Map(dict):
@@ -38,13 +43,16 @@ def _construct_map(loader: _LineLoader, node: yaml.MappingNode) -> _Map:
     out = _Map()
     out.line = node.start_mark.line + 1
     out.key_lines = {}
-    loader.flatten_mapping(node)
-    for key_node, value_node in node.value:
+    own = sum(1 for key_node, _ in node.value if key_node.tag != "tag:yaml.org,2002:merge")
+    loader.flatten_mapping(node)  # merged pairs first, then the mapping's own: own keys override
+    merged = len(node.value) - own
+    for index, (key_node, value_node) in enumerate(node.value):
         key = loader.construct_object(key_node, deep=True)
-        if key in out:
+        if index >= merged and key in out and out.key_lines[key] > 0:
             raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
         out[key] = loader.construct_object(value_node, deep=True)
-        out.key_lines[key] = key_node.start_mark.line + 1
+        out.key_lines[key] = key_node.start_mark.line + 1 if index >= merged else -(key_node.start_mark.line + 1)
+    out.key_lines = {k: abs(v) for k, v in out.key_lines.items()}
     return out
 
 
@@ -57,21 +65,41 @@ def _construct_seq(loader: _LineLoader, node: yaml.SequenceNode) -> _Seq:
 
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
+# YAML 1.2 numbers: ``1e6`` and ``1.0e6`` are floats (YAML 1.1, PyYAML's default, reads them as strings)
+_LineLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
 def load_yaml(path: Path, error: type[InputError]) -> Fields:
     """Parse a YAML file whose top level is a mapping; return its :class:`Fields`."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        size = Path(path).stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise error(
+                f"{path}: the file has {size} bytes; expected a scenario or catalogue of at most {MAX_FILE_BYTES}"
+            )
+        data = Path(path).read_bytes()
     except OSError as exc:
         raise error(f"{path}: cannot read file: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise error(
+            f"{path}:{line}: expected UTF-8 text, got the byte 0x{data[exc.start]:02x} (is it a YAML file?)"
+        ) from None
     try:
         data = yaml.load(text, Loader=_LineLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
         problem = getattr(exc, "problem", None) or str(exc)
-        raise error(f"{where}: malformed YAML: {problem}") from None
+        if problem == "but found another document":
+            raise error(f"{where}: expected one YAML document, found a second one here (after '---')") from None
+        raise error(f"{where}: malformed YAML: {shorten(problem, 200, quote=False)}") from None
     if not isinstance(data, _Map):
         raise error(f"{path}:1: expected a mapping at the top level, got {_kind(data)}")
     return Fields(data, path, "", error)
@@ -85,9 +113,9 @@ def _kind(value: Any) -> str:
     if isinstance(value, (int, float)):
         return f"the number {value}"
     if isinstance(value, str):
-        return f"the string {value!r}"
+        return f"the string {shorten(value)}"
     if isinstance(value, list):
-        return "a list"
+        return f"a list of {len(value)} item{'s' if len(value) != 1 else ''}"
     if isinstance(value, dict):
         return "a mapping"
     return type(value).__name__
@@ -166,14 +194,25 @@ class Fields:
             raise self.fail(key, f"expected a number <= {maximum:g}, got {value:g}")
         return value
 
-    def integer(self, key: str, default: Any = _MISSING, *, minimum: int | None = None) -> int:
+    def integer(
+        self,
+        key: str,
+        default: Any = _MISSING,
+        *,
+        minimum: int | None = None,
+        maximum: int | None = None,
+        why: str = "",
+    ) -> int:
+        """An integer in ``[minimum, maximum]``; ``why`` says why the maximum (in the error)."""
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
             return value
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.fail(key, f"expected an integer, got {_kind(value)}")
         if minimum is not None and value < minimum:
-            raise self.fail(key, f"expected an integer >= {minimum}, got {value}")
+            raise self.fail(key, f"expected an integer >= {minimum}, got {shorten(value)}")
+        if maximum is not None and value > maximum:
+            raise self.fail(key, f"expected an integer <= {maximum}{why and f' ({why})'}, got {shorten(value)}")
         return value
 
     def boolean(self, key: str, default: Any = _MISSING) -> bool:
@@ -187,7 +226,8 @@ class Fields:
         if value is default and default is not _MISSING:
             return value
         if not isinstance(value, list) or len(value) != size:
-            raise self.fail(key, f"expected a list of {size} numbers, got {_kind(value)}")
+            got = f"{len(value)}" if isinstance(value, list) else _kind(value)
+            raise self.fail(key, f"expected {size} numbers, got {got}")
         return tuple(self._check_number(key, v, None, None, f"item {i}: ") for i, v in enumerate(value))
 
     def interval(self, key: str, default: Any = _MISSING) -> tuple[float, float]:
@@ -234,9 +274,15 @@ class Fields:
     def _check_number(self, key, value, minimum, exclusive_minimum, what: str = "") -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(key, f"{what}expected a number, got {_kind(value)}")
+        if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:  # before float(), which may overflow
+            raise self.fail(
+                key, f"{what}expected a number of magnitude at most {MAX_MAGNITUDE:g}, got {shorten(value)}"
+            )
         value = float(value)
         if not math.isfinite(value):
             raise self.fail(key, f"{what}expected a finite number, got {value}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise self.fail(key, f"{what}expected a number of magnitude at most {MAX_MAGNITUDE:g}, got {value:g}")
         if minimum is not None and value < minimum:
             raise self.fail(key, f"{what}expected a number >= {minimum:g}, got {value:g}")
         if exclusive_minimum is not None and value <= exclusive_minimum:

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Literal
 
 from ._yamlio import Fields, load_yaml
-from .exceptions import CatalogError
+from .exceptions import CatalogError, shorten
 
 __all__ = ["JointLimits", "Module", "Grammar", "Catalog", "load_catalog"]
 
@@ -97,7 +97,8 @@ class Catalog:
             return self._by_id[module_id]
         except KeyError:
             raise CatalogError(
-                f"unknown module {module_id!r} in catalogue {self.name!r} (known: {', '.join(self._by_id)})"
+                f"unknown module {shorten(module_id)} in catalogue {self.name!r} "
+                f"(known: {', '.join(list(self._by_id)[:30])}{', ...' if len(self._by_id) > 30 else ''})"
             ) from None
 
     def of_kind(self, kind: Kind) -> tuple[Module, ...]:
@@ -146,15 +147,22 @@ def catalog_from_fields(top: Fields) -> Catalog:
     return Catalog(name=name, modules=tuple(modules), grammar=grammar, source=str(top.path))
 
 
+#: The largest DOF a grammar may ask for: longer chains are not robots anyone builds from modules,
+#: and the count of compositions grows as (modules per slot) ** DOF.
+MAX_DOF = 20
+#: The longest run of links a grammar may ask for between two joints (or after the base).
+MAX_LINK_RUN = 10
+
+
 def _read_grammar(fields: Fields) -> Grammar:
-    dof = _int_range(fields, "dof")
-    after_joint = _int_range(fields, "links_after_joint", (1, 1))
-    after_base = _int_range(fields, "links_after_base", (0, 0))
+    dof = _int_range(fields, "dof", maximum=MAX_DOF)
+    after_joint = _int_range(fields, "links_after_joint", (1, 1), maximum=MAX_LINK_RUN)
+    after_base = _int_range(fields, "links_after_base", (0, 0), maximum=MAX_LINK_RUN)
     fields.done()
     return Grammar(dof=dof, links_after_joint=after_joint, links_after_base=after_base)
 
 
-def _int_range(fields: Fields, key: str, default=None) -> tuple[int, int]:
+def _int_range(fields: Fields, key: str, default=None, *, maximum: int) -> tuple[int, int]:
     if default is not None and not fields.has(key):
         fields.raw(key, None)
         return default
@@ -164,12 +172,13 @@ def _int_range(fields: Fields, key: str, default=None) -> tuple[int, int]:
         low >= 0 and low == int(low) and high == int(high),
         f"expected [min, max] of whole numbers >= 0, got [{low:g}, {high:g}]",
     )
+    fields.check(key, high <= maximum, f"expected a maximum of at most {maximum}, got {high:g}")
     return int(low), int(high)
 
 
 def _read_module(f: Fields) -> Module:
     module_id = f.string("id")
-    f.check("id", module_id.replace("_", "").isalnum(), f"expected letters, digits or '_', got {module_id!r}")
+    f.check("id", module_id.replace("_", "").isalnum(), f"expected letters, digits or '_', got {shorten(module_id)}")
     kind = f.string("kind", choices=KINDS)
     movable = ("revolute", "prismatic")
     if kind == "joint":

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import json
+import math
+import os
 import sys
 import time
 from dataclasses import replace
@@ -12,9 +14,18 @@ from pathlib import Path
 import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
-from .exceptions import ModularRobotsError
-from .execution import make_engine
-from .feasibility import TEST_NAMES, FeasibilitySettings, FeasibilitySummary, filter_compositions
+from .exceptions import ModularRobotsError, Terminated, shorten
+from .execution import make_engine, terminations_raise
+from .feasibility import (
+    MAX_COMPOSITIONS,
+    TEST_NAMES,
+    FeasibilitySettings,
+    FeasibilitySummary,
+    composition_space,
+    estimate_seconds,
+    filter_compositions,
+)
+from .folder import atomic_write, check_writable
 from .ocp.candidate import BoundaryPair
 from .pipeline import optimize_composition, run_scenario, with_pruning
 from .report import RESULT, export_controller_rate
@@ -25,16 +36,101 @@ __all__ = ["main"]
 
 
 def _user_errors(command):
-    """Show package errors as a one-line ``Error: …`` and exit 1, without a traceback."""
+    """End every failure with a one-line ``Error: …`` and a non-zero exit, never a traceback:
+    package errors and failed file operations exit 1, an interruption 130 (Ctrl-C) or 128 + the
+    signal's number (``SIGTERM``, ``SIGHUP``); anything else is reported as unexpected (set
+    ``MODULAR_ROBOTS_DEBUG=1`` for its traceback)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         try:
-            return command(*args, **kwargs)
+            with terminations_raise():
+                return command(*args, **kwargs)
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise
         except ModularRobotsError as exc:
             raise click.ClickException(str(exc)) from None
+        except Terminated as exc:
+            _fail(str(exc), 128 + exc.signum)
+        except KeyboardInterrupt:
+            _fail("interrupted by the user", 130)
+        except OSError as exc:
+            raise click.ClickException(_os_error(exc)) from None
+        except Exception as exc:
+            if os.environ.get("MODULAR_ROBOTS_DEBUG"):
+                raise
+            raise click.ClickException(
+                f"unexpected {type(exc).__name__}: {shorten(exc, 300, quote=False)} "
+                "(please report it with the command and its input files; MODULAR_ROBOTS_DEBUG=1 shows where)"
+            ) from None
 
     return wrapper
+
+
+def _fail(message: str, code: int) -> None:
+    click.echo(f"Error: {message}", err=True)
+    sys.exit(code)
+
+
+def _os_error(exc: OSError) -> str:
+    where = f"{shorten(exc.filename, 200, quote=False)}: " if exc.filename else ""
+    return f"{where}{exc.strerror or exc}"
+
+
+class _Number(click.ParamType):
+    """A finite number in a range (click's ``FloatRange`` lets ``nan`` through)."""
+
+    name = "number"
+
+    def __init__(self, minimum: float = -1e9, maximum: float = 1e9, *, positive: bool = False, hint: str = ""):
+        self.minimum, self.maximum, self.positive, self.hint = minimum, maximum, positive, hint
+
+    def convert(self, value, param, ctx):
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"expected a number, got {shorten(value)}", param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"expected a finite number, got {value}{self.hint}", param, ctx)
+        if self.positive and number <= self.minimum:
+            self.fail(f"expected a number > {self.minimum:g}, got {number:g}", param, ctx)
+        if not self.minimum <= number <= self.maximum:
+            self.fail(f"expected a number in [{self.minimum:g}, {self.maximum:g}], got {number:g}", param, ctx)
+        return number
+
+
+def _folder_name(ctx, param, text: str | None) -> Path | None:
+    """``--out``: a usable path, checked before any work."""
+    if text is None:
+        return None
+    if not text.strip():
+        raise click.BadParameter("expected a folder, got an empty name")
+    value = Path(text)
+    for part in value.parts:
+        if len(os.fsencode(part)) > 255:
+            raise click.BadParameter(f"{shorten(part)}: a file or folder name is at most 255 bytes")
+    if value.exists() and not value.is_dir():
+        raise click.BadParameter(f"{shorten(value, 200, quote=False)} exists and is not a folder")
+    return value
+
+
+def _space(scenario, jobs: int, max_compositions: int) -> int:
+    """Say how many compositions step B will check and about how long it takes (or refuse)."""
+    total = composition_space(scenario.catalog, max_compositions, jobs)
+    click.echo(
+        f"step A: {total:,} compositions; step B takes about {estimate_seconds(total, jobs):.0f} s on {jobs} core(s)",
+        err=True,
+    )
+    return total
+
+
+_max_compositions = click.option(
+    "--max-compositions",
+    type=click.IntRange(min=1),
+    default=MAX_COMPOSITIONS,
+    show_default=True,
+    help="Refuse a catalogue whose grammar allows more compositions (step B's time grows with them).",
+)
 
 
 _existing_file = click.Path(exists=True, dir_okay=False, path_type=Path)
@@ -76,7 +172,7 @@ def enumerate_command(source: Path, count: bool, dof: int | None) -> None:
 )
 @click.option(
     "--payload",
-    type=click.FloatRange(min=0.0),
+    type=_Number(0.0, 1e6),
     default=None,
     help="Payload [kg]; default: the scenario's, or 0 for a catalogue.",
 )
@@ -118,19 +214,28 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
     default=None,
     help="Write the verdict summary and the survivors with their boundary configurations as JSON.",
 )
+@_max_compositions
 @_user_errors
-def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None) -> None:
+def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None, max_compositions: int) -> None:
     """Step B: which compositions can hold the start and the goal (reach, IK, torque, collision)."""
     scenario = load_scenario(scenario_path)
     settings = FeasibilitySettings(seeds=seeds)
     engine = make_engine(jobs)
-    total = sum(count_compositions(scenario.catalog).values())
+    if out is not None:
+        if out.is_dir():
+            raise click.BadParameter(
+                f"{shorten(out, 200, quote=False)} is a folder; expected a JSON file name", param_hint="--out"
+            )
+        check_writable(out.parent)
+    total = _space(scenario, engine.jobs, max_compositions)
     summary = FeasibilitySummary()
     start = time.perf_counter()
     with click.progressbar(
         length=total, label=f"step B on {total} compositions", file=sys.stderr, show_pos=True
     ) as bar:
-        for verdict in filter_compositions(scenario, engine=engine, settings=settings):
+        for verdict in filter_compositions(
+            scenario, engine=engine, settings=settings, max_compositions=max_compositions
+        ):
             summary.add(verdict)
             bar.update(1)
     wall = time.perf_counter() - start
@@ -142,7 +247,9 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None)
     if summary.survivors:
         click.echo(_survivor_table(summary))
     if out is not None:
-        out.write_text(json.dumps(_feasibility_json(scenario, settings, summary, wall, engine.jobs), indent=1) + "\n")
+        atomic_write(
+            out, json.dumps(_feasibility_json(scenario, settings, summary, wall, engine.jobs), indent=1) + "\n"
+        )
         click.echo(f"wrote {out}")
     if not summary.survivors:
         raise click.ClickException(summary.diagnosis())
@@ -154,8 +261,9 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None)
 @click.option(
     "--out",
     "out",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=str,
     required=True,
+    callback=_folder_name,
     help="Results folder (created if missing).",
 )
 @click.option(
@@ -211,15 +319,16 @@ def optimize_command(
 @click.option(
     "--out",
     "out",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=str,
     default=None,
     show_default="results/<scenario name>",
+    callback=_folder_name,
     help="Results folder (created if missing).",
 )
 @click.option("--rule", type=click.Choice(RULES), default=None, help="Override the scenario's pruning rule.")
 @click.option(
     "--threshold",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=_Number(0.0, 1e6, positive=True, hint="; to never prune, use --rule none"),
     default=None,
     help="Override the ratio rule's threshold.",
 )
@@ -231,11 +340,15 @@ def optimize_command(
     show_default="all cores",
     help="Worker processes (1: run in this process).",
 )
+@_max_compositions
 @_user_errors
-def run_command(scenario_path: Path, out: Path | None, rule: str | None, threshold: float | None, jobs: int) -> None:
+def run_command(
+    scenario_path: Path, out: Path | None, rule: str | None, threshold: float | None, jobs: int, max_compositions: int
+) -> None:
     """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
     scenario = with_pruning(load_scenario(scenario_path), rule, threshold)
     out = out or Path("results") / scenario.name
+    _space(scenario, make_engine(jobs).jobs, max_compositions)
     click.echo(
         f"{scenario.name}: rule {scenario.pruning.rule}"
         + (
@@ -260,16 +373,14 @@ def run_command(scenario_path: Path, out: Path | None, rule: str | None, thresho
                     f"cost {best}, pruning reference {reference}"
                 )
 
-        result = run_scenario(scenario, out, jobs, on_progress=progress)
+        result = run_scenario(scenario, out, jobs, on_progress=progress, max_compositions=max_compositions)
     click.echo(_run_table(result, scenario))
     click.echo(f"wrote {_written(out)}")
 
 
 @main.command("export")
 @click.argument("results", type=click.Path(exists=True, file_okay=False, path_type=Path), metavar="RESULTS_DIR")
-@click.option(
-    "--rate", type=click.FloatRange(min=1.0, max=1e5), default=1000.0, show_default=True, help="Controller rate [Hz]."
-)
+@click.option("--rate", type=_Number(1.0, 1e5), default=1000.0, show_default=True, help="Controller rate [Hz].")
 @_user_errors
 def export_command(results: Path, rate: float) -> None:
     """Resample the winner of RESULTS_DIR at a controller rate: a CSV under the zero-order-hold

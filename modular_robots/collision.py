@@ -17,11 +17,14 @@ import pinocchio as pin
 from .robot import RobotModel
 from .scenario import SphereObstacle
 
-__all__ = ["CollisionModel", "Distances", "PATH_CLEARANCE", "penetration"]
+__all__ = ["CollisionModel", "Distances", "PATH_CLEARANCE", "CULL_DISTANCE", "penetration", "reach_bound"]
 
 #: Clearance a joint-space path must keep from every obstacle to count as clear [m] (step C's
 #: initial guess).
 PATH_CLEARANCE = 0.02
+#: Obstacles farther than this from everything the robot can reach [m] are left out of the
+#: distance computations (every clearance the package asks for is far smaller).
+CULL_DISTANCE = 1.0
 
 
 @dataclass(frozen=True)
@@ -42,12 +45,23 @@ class CollisionModel:
     """FCL shapes of one robot's primitives and of the obstacles around it.
 
     ``primitives`` selects which of the robot's primitives take part (indices into
-    ``robot.primitives``; default all of them).
+    ``robot.primitives``; default all of them). Only the obstacles within
+    :data:`CULL_DISTANCE` of the robot's reach (:func:`reach_bound`) take part: ``obstacles`` is
+    those, in the given order, and every per-obstacle result is indexed by them; a distance to an
+    obstacle left out is always larger than :data:`CULL_DISTANCE`. ``cull=False`` keeps them all
+    (for primitives placed by hand, out of the robot's reach).
     """
 
-    def __init__(self, robot: RobotModel, obstacles: Sequence[SphereObstacle], primitives: Sequence[int] | None = None):
+    def __init__(
+        self,
+        robot: RobotModel,
+        obstacles: Sequence[SphereObstacle],
+        primitives: Sequence[int] | None = None,
+        cull: bool = True,
+    ):
         self.robot = robot
-        self.obstacles = tuple(obstacles)
+        reach = reach_bound(robot) + CULL_DISTANCE if cull else np.inf
+        self.obstacles = tuple(o for o in obstacles if np.linalg.norm(o.center) - o.radius <= reach)
         self.primitive_indices = tuple(range(len(robot.primitives)) if primitives is None else primitives)
         self._primitives = [robot.primitives[i] for i in self.primitive_indices]
         self._frame_ids = [int(robot.model.getFrameId(p.frame)) for p in self._primitives]
@@ -186,6 +200,27 @@ class CollisionModel:
     def in_collision(self, q: np.ndarray) -> bool:
         """True if any primitive touches or overlaps any obstacle."""
         return self.min_distance(q) <= 0.0
+
+
+def reach_bound(robot: RobotModel) -> float:
+    """An upper bound on the distance from the base origin of any point of the robot's collision
+    primitives, in any configuration [m]: along the chain, each joint placement's offset (plus a
+    prismatic joint's largest travel), then the primitive's offset from its frame, its axis and
+    its radius."""
+    model = robot.model
+    reach = np.zeros(model.njoints)
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        travel = 0.0
+        if joint.shortname().startswith("JointModelP") and joint.nq == 1:
+            travel = max(abs(model.lowerPositionLimit[joint.idx_q]), abs(model.upperPositionLimit[joint.idx_q]))
+        reach[j] = reach[model.parents[j]] + np.linalg.norm(model.jointPlacements[j].translation) + travel
+    out = 0.0
+    for p in robot.primitives:
+        frame = model.frames[model.getFrameId(p.frame)]
+        extent = max(abs(p.offset), abs(p.offset + p.length)) + p.radius
+        out = max(out, reach[frame.parentJoint] + np.linalg.norm(frame.placement.translation) + extent)
+    return float(out)
 
 
 def _separation(a: fcl.CollisionObject, b: fcl.CollisionObject) -> tuple[float, np.ndarray, np.ndarray]:

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from .catalog import Catalog, Module
-from .exceptions import CatalogError, CompositionError
+from .exceptions import CatalogError, CompositionError, shorten
 
 __all__ = ["Composition", "enumerate_compositions", "count_compositions"]
 
@@ -48,13 +48,13 @@ class Composition:
         """
         ids = tuple(part.strip() for part in str(name).split(SEPARATOR))
         if not name or any(not part for part in ids):
-            raise CompositionError(f"composition {name!r}: expected module ids joined by '-', e.g. B-J1-L2-E1")
+            raise CompositionError(f"composition {shorten(name)}: expected module ids joined by '-', e.g. B-J1-L2-E1")
         modules = []
         for position, module_id in enumerate(ids):
             try:
                 modules.append(catalog.module(module_id))
             except CatalogError as exc:
-                raise CompositionError(f"composition {name!r}, position {position + 1}: {exc}") from None
+                raise CompositionError(f"composition {shorten(name)}, position {position + 1}: {exc}") from None
         _check_grammar(name, modules, catalog)
         return cls(ids, sum(m.dof for m in modules))
 
@@ -63,7 +63,7 @@ def _check_grammar(name: str, modules: list[Module], catalog: Catalog) -> None:
     g = catalog.grammar
 
     def fail(message: str) -> CompositionError:
-        return CompositionError(f"composition {name!r}: {message} (catalogue {catalog.name!r})")
+        return CompositionError(f"composition {shorten(name)}: {message} (catalogue {catalog.name!r})")
 
     if modules[0].kind != "base":
         raise fail(f"must start with a base module, not {modules[0].id} ({modules[0].kind})")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 __all__ = [
     "ModularRobotsError",
     "InputError",
@@ -9,6 +11,8 @@ __all__ = [
     "ScenarioError",
     "CompositionError",
     "InfeasibleError",
+    "Terminated",
+    "shorten",
 ]
 
 
@@ -39,3 +43,23 @@ class CompositionError(InputError):
 class InfeasibleError(ModularRobotsError):
     """The task cannot be done: no composition (or not the one asked for) passes step B, or every
     candidate's optimisation failed. The message says which test or failure decided it."""
+
+
+class Terminated(KeyboardInterrupt):
+    """The process was asked to end by a signal (``SIGTERM``, ``SIGHUP``): raised in the main
+    thread while a run is recorded, so the run ends as an interrupted one, like Ctrl-C."""
+
+    def __init__(self, signum: int):
+        self.signum = signum
+        self.name = signal.Signals(signum).name
+        super().__init__(f"terminated by {self.name}")
+
+
+def shorten(value: object, limit: int = 60, quote: bool = True) -> str:
+    """``repr(value)`` (``str`` if not ``quote``), cut to about ``limit`` characters with its
+    length said, so that an error message never echoes a huge input."""
+    text = repr(value) if quote else str(value)
+    if len(text) <= limit:
+        return text
+    size = f"{len(value)} characters" if isinstance(value, str) else f"{len(text)} characters as text"
+    return f"{text[:limit]}... ({size})"

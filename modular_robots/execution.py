@@ -26,6 +26,7 @@ import itertools
 import multiprocessing
 import os
 import signal
+import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -33,7 +34,7 @@ from typing import Any, Protocol, TypeVar
 
 from threadpoolctl import threadpool_limits
 
-from .exceptions import ModularRobotsError
+from .exceptions import ModularRobotsError, Terminated
 
 __all__ = [
     "Engine",
@@ -46,6 +47,7 @@ __all__ = [
     "ProcessExecutor",
     "make_executor",
     "single_threaded_blas",
+    "terminations_raise",
 ]
 
 T = TypeVar("T")
@@ -55,6 +57,35 @@ R = TypeVar("R")
 def single_threaded_blas() -> contextlib.AbstractContextManager:
     """A context in which BLAS (and OpenMP) use one thread (see the module docstring)."""
     return threadpool_limits(limits=1)
+
+
+#: The signals that end a run as an interruption: ``kill``/``timeout``/a batch scheduler, a closed terminal.
+TERMINATING = (signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def terminations_raise() -> Iterator[None]:
+    """Within the block, ``SIGTERM`` and ``SIGHUP`` raise :class:`~modular_robots.exceptions.Terminated`
+    in the main thread (where they would otherwise end the process on the spot), so that a run's
+    ``finally`` blocks and its record of the ending run as they do for Ctrl-C. Signals whose
+    handler the application set itself are left alone, and so is a block outside the main thread.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for signum in TERMINATING:
+        if signal.getsignal(signum) == signal.SIG_DFL:
+            previous[signum] = signal.signal(signum, _raise_terminated)
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated(signum)
 
 
 def available_cores() -> int:

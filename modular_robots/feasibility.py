@@ -30,7 +30,8 @@ import numpy as np
 
 from .catalog import Catalog
 from .collision import CollisionModel
-from .composition import Composition, enumerate_compositions
+from .composition import Composition, count_compositions, enumerate_compositions
+from .exceptions import InputError
 from .execution import Engine, make_engine
 from .ik import DEFAULT_TOLERANCE, distinct, ik_seeds, solve_position_ik
 from .robot import RobotModel, robot_model
@@ -45,6 +46,9 @@ __all__ = [
     "max_reach",
     "check_composition",
     "filter_compositions",
+    "composition_space",
+    "estimate_seconds",
+    "MAX_COMPOSITIONS",
 ]
 
 
@@ -333,21 +337,63 @@ def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
     return [check_composition(c, catalog, task, settings) for c in chunk]
 
 
+#: CPU seconds of step B per composition on the paper's catalogue (``benchmarks/bench_feasibility.py``
+#: measures about 2.2 ms), for the estimate given before long work.
+SECONDS_PER_COMPOSITION = 2.5e-3
+#: Step A spaces larger than this are refused unless a larger ``max_compositions`` is given.
+MAX_COMPOSITIONS = 1_000_000
+
+
+def composition_space(catalog: Catalog, max_compositions: int = MAX_COMPOSITIONS, jobs: int = 1) -> int:
+    """The number of compositions of step A, counted without listing them.
+
+    Raises
+    ------
+    InputError
+        If there are more than ``max_compositions``, with the count and an estimate of step B's
+        wall time on ``jobs`` cores, before any work starts.
+    """
+    total = sum(count_compositions(catalog).values())
+    if total > max_compositions:
+        low, high = catalog.grammar.dof
+        raise InputError(
+            f"the catalogue {catalog.name!r} allows {total:,} compositions ({low} to {high} DOF); step B would take "
+            f"about {_duration(estimate_seconds(total, jobs))} on {jobs} core(s). Narrow its "
+            f"grammar (grammar.dof) or raise the limit of {max_compositions:,} (--max-compositions)"
+        )
+    return total
+
+
+def estimate_seconds(compositions: int, jobs: int) -> float:
+    """Step B's expected wall time [s] for ``compositions`` on ``jobs`` cores."""
+    return compositions * SECONDS_PER_COMPOSITION / max(jobs, 1)
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
+
+
 def filter_compositions(
     scenario: Scenario,
     compositions: Iterable[Composition] | None = None,
     *,
     engine: Engine | None = None,
     settings: FeasibilitySettings = FeasibilitySettings(),
+    max_compositions: int = MAX_COMPOSITIONS,
 ) -> Iterator[Verdict]:
-    """Yield a :class:`Verdict` per composition (default: all of step A), in input order.
+    """Yield a :class:`Verdict` per composition (default: all of step A, refused above
+    ``max_compositions``, see :func:`composition_space`), in input order.
 
     Streams: compositions are drawn lazily and at most a few chunks are in flight, on every
     core by default. Verdicts do not depend on the engine or its number of workers.
     """
-    if compositions is None:
-        compositions = enumerate_compositions(scenario.catalog)
     engine = engine or make_engine()
+    if compositions is None:
+        composition_space(scenario.catalog, max_compositions, engine.jobs)
+        compositions = enumerate_compositions(scenario.catalog)
     context = (scenario.catalog, scenario.task, settings)
     yield from engine.map_chunks(_check_chunk, context, compositions, chunksize=8)
 

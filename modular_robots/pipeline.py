@@ -17,9 +17,17 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from .composition import Composition
-from .exceptions import CompositionError, InfeasibleError
+from .exceptions import CompositionError, InfeasibleError, Terminated
 from .execution import make_engine, make_executor, single_threaded_blas
-from .feasibility import FeasibilitySettings, FeasibilitySummary, Verdict, check_composition, filter_compositions
+from .feasibility import (
+    MAX_COMPOSITIONS,
+    FeasibilitySettings,
+    FeasibilitySummary,
+    Verdict,
+    check_composition,
+    composition_space,
+    filter_compositions,
+)
 from .ocp.candidate import BoundaryPair, CandidateResult, CandidateSpec, CandidateStatus, make_candidate
 from .ocp.solver import Iterate
 from .ocp.tracking import Tracking, track
@@ -96,6 +104,7 @@ def run_scenario(
     jobs: int | None = None,
     feasibility: FeasibilitySettings = FeasibilitySettings(),
     on_progress: Callable[[str, dict], None] | None = None,
+    max_compositions: int = MAX_COMPOSITIONS,
 ) -> RunResult:
     """Enumerate, filter, optimise in lockstep with pruning, pick and export the winner.
 
@@ -109,19 +118,26 @@ def run_scenario(
         Worker processes (None or 0: every core; 1: this process only).
     on_progress
         Called with ``(stage, figures)`` during the run (``feasibility`` / ``optimization``).
+    max_compositions
+        Refuse a catalogue whose grammar allows more compositions, before any work
+        (:func:`~modular_robots.feasibility.composition_space`).
 
     Raises
     ------
+    InputError
+        If the catalogue allows more than ``max_compositions`` compositions.
     InfeasibleError
         If no composition passes step B, or every candidate's optimisation fails; ``result.json``
         then says why.
     """
     notify = on_progress or (lambda stage, figures: None)
     engine = make_engine(jobs)
+    composition_space(scenario.catalog, max_compositions, engine.jobs)
     summary = FeasibilitySummary()
     start = time.perf_counter()
     with RunRecorder(out, scenario, jobs=engine.jobs) as recorder:
-        for verdict in filter_compositions(scenario, engine=engine, settings=feasibility):
+        stream = filter_compositions(scenario, engine=engine, settings=feasibility, max_compositions=max_compositions)
+        for verdict in stream:
             summary.add(verdict)
             notify("feasibility", {"checked": summary.checked, "feasible": len(summary.survivors)})
         recorder.update(counts=summary.counts(), seconds={"feasibility": time.perf_counter() - start})
@@ -224,7 +240,7 @@ def optimize_composition(
                     for it in candidate.iterate():
                         notify(candidate.name, it)
                     record()
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             for candidate in candidates:
                 candidate.close()
             done = _winner(record())
@@ -232,7 +248,7 @@ def optimize_composition(
                 recorder.record_winner(done)
             recorder.finish(
                 "interrupted",
-                "interrupted by the user"
+                (str(exc) if isinstance(exc, Terminated) else "interrupted by the user")
                 + (f"; {done.name} had already verified and is written as the winner so far" if done else ""),
             )
             raise

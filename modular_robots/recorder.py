@@ -3,12 +3,17 @@
 
 The document is rewritten as the run goes (started, stage counts, candidate results, winner,
 finished), every time atomically, so an interrupted or crashed run leaves a readable folder whose
-``status`` says what happened.
+``status`` says what happened: Ctrl-C, ``SIGTERM`` or ``SIGHUP`` (``interrupted``), an exception,
+including a write that failed on a full disk (``failed``). The folder is locked for the run
+(:class:`~modular_robots.folder.ResultsFolder`), and a previous run's winner files are removed
+when it starts, so the folder holds only the files of the run its ``result.json`` describes.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import asdict
@@ -16,10 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .exceptions import Terminated
+from .execution import terminations_raise
+from .folder import ResultsFolder, atomic_write
 from .ocp.candidate import CandidateResult
 from .ocp.tracking import Tracking
 from .ocp.trajectory import Trajectory
-from .report import RESULT, atomic_write, write_pruning_plot, write_winner_files
+from .report import RESULT, WINNER_FILES, write_pruning_plot, write_winner_files
 from .scenario import Scenario
 
 __all__ = ["RunRecorder", "RESULT", "STATUSES"]
@@ -32,8 +40,12 @@ STATUSES = ("running", "done", "infeasible", "failed", "interrupted")
 class RunRecorder:
     """Record one run (or one ``optimize``) into the folder ``out``; ``out=None`` records nothing.
 
-    Use it as a context manager: leaving the block with an exception marks the run
-    ``interrupted`` (Ctrl-C) or ``failed`` (any other error) unless it already ended.
+    Use it as a context manager: it locks the folder (a second run into it raises
+    :class:`~modular_robots.folder.FolderBusyError`), removes a previous run's winner files, and
+    writes ``result.json`` at once (so an unwritable folder fails before any work). Within the
+    block ``SIGTERM`` and ``SIGHUP`` raise :class:`~modular_robots.exceptions.Terminated`.
+    Leaving the block with an exception marks the run ``interrupted`` (Ctrl-C, a terminating
+    signal) or ``failed`` (any other error) unless it already ended.
 
     Parameters
     ----------
@@ -47,8 +59,8 @@ class RunRecorder:
 
     def __init__(self, out: str | Path | None, scenario: Scenario, **settings):
         self.path = Path(out) if out is not None else None
-        if self.path is not None:
-            self.path.mkdir(parents=True, exist_ok=True)
+        self._folder = ResultsFolder(self.path, _previous_files(self.path)) if self.path is not None else None
+        self._exits = contextlib.ExitStack()
         self.scenario = scenario
         self.settings = {
             "optimizer": asdict(scenario.optimizer),
@@ -67,15 +79,25 @@ class RunRecorder:
 
     # -- the lifecycle ----------------------------------------------------------------------------
     def __enter__(self) -> RunRecorder:
-        self._write()
+        with contextlib.ExitStack() as stack:
+            if self._folder is not None:
+                stack.enter_context(self._folder)
+            stack.enter_context(terminations_raise())
+            self._write()
+            self._exits = stack.pop_all()
         return self
 
     def __exit__(self, kind, exc, traceback) -> bool:
-        if kind is not None and self.status == "running":
-            if issubclass(kind, KeyboardInterrupt):
-                self.finish("interrupted", "interrupted by the user; candidates still running were stopped")
-            else:
-                self.finish("failed", f"stopped by an error: {exc}")
+        try:
+            if kind is not None and self.status == "running":
+                if issubclass(kind, Terminated):
+                    self._end("interrupted", f"{exc}; candidates still running were stopped")
+                elif issubclass(kind, KeyboardInterrupt):
+                    self._end("interrupted", "interrupted by the user; candidates still running were stopped")
+                else:
+                    self._end("failed", f"stopped by an error: {_describe(exc)}")
+        finally:
+            self._exits.close()
         return False
 
     def update(
@@ -104,9 +126,13 @@ class RunRecorder:
         files = {}
         if self.path is not None:
             start = time.perf_counter()
-            files = write_winner_files(self.path, winner)
-            if pruning_plot_title is not None:
-                files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
+            try:
+                files = write_winner_files(self.path, winner)
+                if pruning_plot_title is not None:
+                    files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
+            except BaseException:  # no winner file without a result.json that names it
+                self._folder.remove(WINNER_FILES)
+                raise
             self.seconds["report"] = time.perf_counter() - start
         self.winner = _winner_json(winner, files, tracking)
         return files
@@ -117,6 +143,17 @@ class RunRecorder:
             raise ValueError(f"a run ends as one of {STATUSES[1:]}, not {status!r}")
         self.status, self.message = status, message
         self._write()
+
+    def _end(self, status: str, message: str) -> None:
+        """:meth:`finish` while the block is left by an exception: if the document cannot be
+        written whole (a full disk), its short form is written over the old one in place, which
+        needs no new space; if even that fails, the exception that ended the run propagates."""
+        try:
+            self.finish(status, message)
+        except OSError as exc:
+            self.message = f"{message}; result.json cut short: {_describe(exc)}"
+            with contextlib.suppress(OSError):
+                _overwrite(self.path / RESULT, json.dumps(self.summary(), indent=1) + "\n")
 
     # -- the document -----------------------------------------------------------------------------
     def document(self) -> dict:
@@ -139,10 +176,43 @@ class RunRecorder:
             },
         }
 
+    def summary(self) -> dict:
+        """The document without the candidates' histories (what fits where nothing else does)."""
+        document = self.document()
+        document["candidates"] = [{"candidate": r.name, "status": str(r.status)} for r in self.results]
+        return document
+
     def _write(self) -> None:
         self._last_write = time.perf_counter()
         if self.path is not None:
             atomic_write(self.path / RESULT, json.dumps(self.document(), indent=1, allow_nan=False) + "\n")
+
+
+def _previous_files(folder: Path) -> list[str]:
+    """The files a previous run left in ``folder``: its winner's files and controller-rate exports."""
+    names = set(WINNER_FILES)
+    with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
+        names.update(json.loads((folder / RESULT).read_text())["winner"]["files"].values())
+    with contextlib.suppress(OSError):
+        names.update(p.name for p in folder.glob("trajectory_*hz.csv"))
+    return sorted(n for n in names if isinstance(n, str) and n.strip(".") and "/" not in n and n != RESULT)
+
+
+def _overwrite(path: Path, text: str) -> None:
+    """Write ``text`` over the file ``path`` in place (its old blocks are reused: no new space)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, text.encode())
+    finally:
+        os.close(fd)
+
+
+def _describe(exc: BaseException) -> str:
+    """An exception as one line: ``OSError`` by its file and reason, others by their message."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return f"{exc.strerror}" + (f": {exc.filename}" if exc.filename else "")
+    return str(exc) or type(exc).__name__
 
 
 def _winner_json(result: CandidateResult, files: dict, tracking: Tracking | None) -> dict:

@@ -2,26 +2,25 @@
 ``trajectory.csv``, the joints plot (the paper's Fig. 4) and the pruning history — all read from
 candidate results, never recomputed. :class:`~modular_robots.recorder.RunRecorder` decides when.
 
-Every file is written to a temporary name and renamed into place, so a reader (or a crash) never
-sees half a file.
+Every file is written to a temporary name and renamed into place
+(:func:`~modular_robots.folder.atomic_path`), so a reader (or a crash) never sees half a file.
 """
 
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from .exceptions import InputError
+from .folder import atomic_path, atomic_write
 from .ocp.candidate import CandidateResult, CandidateStatus
 from .ocp.trajectory import Trajectory, controller_rate, joint_trajectory
 from .robot import robot_from_urdf
 
 __all__ = [
-    "atomic_write",
     "plot_joints",
     "plot_pruning_history",
     "write_pruning_plot",
@@ -30,6 +29,7 @@ __all__ = [
     "TRAJECTORY",
     "JOINTS_PLOT",
     "PRUNING_PLOT",
+    "WINNER_FILES",
 ]
 
 RESULT = "result.json"
@@ -37,13 +37,8 @@ URDF = "winner.urdf"
 TRAJECTORY = "trajectory.csv"
 JOINTS_PLOT = "joints.png"
 PRUNING_PLOT = "pruning.png"
-
-
-def atomic_write(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file renamed into place."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+#: The files a run writes besides ``result.json`` (and only when it has a winner).
+WINNER_FILES = (URDF, TRAJECTORY, JOINTS_PLOT, PRUNING_PLOT)
 
 
 def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -> dict[str, str]:
@@ -62,9 +57,8 @@ def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -
     if result.urdf is not None:
         atomic_write(folder / URDF, result.urdf)
         files["urdf"] = URDF
-    tmp = folder / f".{TRAJECTORY}.tmp"
-    result.trajectory.write_csv(tmp)
-    os.replace(tmp, folder / TRAJECTORY)
+    with atomic_path(folder / TRAJECTORY) as tmp:
+        result.trajectory.write_csv(tmp)
     files["trajectory"] = TRAJECTORY
     plot_joints(result.trajectory, folder / JOINTS_PLOT, title or result.name)
     files["joints_plot"] = JOINTS_PLOT
@@ -98,9 +92,8 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     robot = robot_from_urdf(urdf, (winner.get("drive") or {}).get("armature"))
     resampled = controller_rate(trajectory, robot, rate)
     csv_path = folder / f"trajectory_{rate:g}hz.csv"
-    tmp = csv_path.with_name(f".{csv_path.name}.tmp")
-    resampled.write_csv(tmp, accelerations=False)
-    os.replace(tmp, csv_path)
+    with atomic_path(csv_path) as tmp:
+        resampled.write_csv(tmp, accelerations=False)
     json_path = folder / "trajectory.json"
     atomic_write(json_path, json.dumps(joint_trajectory(resampled, robot.joint_names)) + "\n")
     return {"csv": csv_path, "json": json_path}
@@ -186,7 +179,5 @@ def plot_pruning_history(results: Sequence[CandidateResult], winner: str | None,
 
 
 def _save(fig, path: Path) -> None:
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    fig.savefig(tmp, dpi=110)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)

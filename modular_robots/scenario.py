@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ._yamlio import Fields, load_yaml
 from .catalog import Catalog, catalog_from_fields, load_catalog
-from .exceptions import InputError, ScenarioError
+from .exceptions import InputError, ScenarioError, shorten
 
 __all__ = ["SphereObstacle", "Task", "OptimizerSettings", "PruningSettings", "Scenario", "load_scenario"]
 
@@ -16,6 +17,15 @@ COSTS = ("time", "effort")
 RULES = ("ratio", "paper", "none")
 REFERENCES = ("trusted", "verified")
 TRANSCRIPTIONS = ("forward", "inverse")
+#: A scenario's name is its results folder's default name: one safe path component.
+NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
+#: The shortest start-goal distance of a task [m]: closer, there is no motion to optimise.
+MIN_TRAVEL = 1e-3
+#: Largest shooting nodes and sub-steps: the solver's matrices are dense, so memory and time grow
+#: with the square of the nodes (100 nodes of a 6-DOF arm are ~1200 variables).
+MAX_NODES = 100
+MAX_SUBSTEPS = 100
+MAX_ITERATIONS = 100_000
 
 
 @dataclass(frozen=True)
@@ -119,6 +129,12 @@ def _scenario_from_fields(top: Fields) -> Scenario:
     top = top.reporting(ScenarioError)
     path = top.path
     name = top.string("name")
+    top.check(
+        "name",
+        NAME.fullmatch(name) is not None,
+        f"expected a name of at most 100 letters, digits, '.', '_' or '-' that starts with a letter or digit "
+        f"(it names the results folder), got {shorten(name)}",
+    )
     top.string("description", default="")
     catalog_path = path.parent / top.string("catalog")
     if not catalog_path.is_file():
@@ -135,6 +151,12 @@ def _read_task(f: Fields) -> Task:
     payload = f.number("payload", minimum=0.0)
     start = f.vector("start", 3)
     goal = f.vector("goal", 3)
+    f.check(
+        "goal",
+        math.dist(start, goal) >= MIN_TRAVEL,
+        f"the goal is {math.dist(start, goal) * 1000:.3g} mm from the start; expected at least "
+        f"{MIN_TRAVEL * 1000:g} mm (a task moves the payload)",
+    )
     obstacles = []
     for item in f.mappings("obstacles", default=()):
         sphere = item.mapping("sphere")
@@ -162,14 +184,17 @@ def _read_task(f: Fields) -> Task:
     return Task(payload, start, goal, tuple(obstacles), cost, self_collision)
 
 
+_DENSE = "the solver's matrices are dense: memory and time grow with the square of the problem's size"
+
+
 def _read_optimizer(f: Fields | None) -> OptimizerSettings:
     if f is None:
         return OptimizerSettings()
     d = OptimizerSettings()
     settings = OptimizerSettings(
-        nodes=f.integer("nodes", default=d.nodes, minimum=3),
-        substeps=f.integer("substeps", default=d.substeps, minimum=1),
-        max_iterations=f.integer("max_iterations", default=d.max_iterations, minimum=1),
+        nodes=f.integer("nodes", default=d.nodes, minimum=3, maximum=MAX_NODES, why=_DENSE),
+        substeps=f.integer("substeps", default=d.substeps, minimum=1, maximum=MAX_SUBSTEPS, why=_DENSE),
+        max_iterations=f.integer("max_iterations", default=d.max_iterations, minimum=1, maximum=MAX_ITERATIONS),
         tolerance=f.number("tolerance", default=d.tolerance, exclusive_minimum=0.0),
         constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance, exclusive_minimum=0.0),
         transcription=f.string("transcription", default=d.transcription, choices=TRANSCRIPTIONS),
@@ -188,13 +213,13 @@ def _read_pruning(f: Fields | None) -> PruningSettings:
     settings = PruningSettings(
         rule=f.string("rule", default=d.rule, choices=RULES),
         threshold=f.number("threshold", default=d.threshold, exclusive_minimum=0.0),
-        start_iteration=f.integer("start_iteration", default=d.start_iteration, minimum=1),
-        window=f.integer("window", default=d.window, minimum=0),
+        start_iteration=f.integer("start_iteration", default=d.start_iteration, minimum=1, maximum=MAX_ITERATIONS),
+        window=f.integer("window", default=d.window, minimum=0, maximum=MAX_ITERATIONS),
         lookahead=f.number("lookahead", default=d.lookahead, minimum=0.0),
-        patience=f.integer("patience", default=d.patience, minimum=0),
+        patience=f.integer("patience", default=d.patience, minimum=0, maximum=MAX_ITERATIONS),
         reference=f.string("reference", default=d.reference, choices=REFERENCES),
         gate=f.number("gate", default=d.gate, minimum=0.0),
-        admission=f.integer("admission", default=d.admission, minimum=0),
+        admission=f.integer("admission", default=d.admission, minimum=0, maximum=1_000_000),
     )
     f.done()
     return settings

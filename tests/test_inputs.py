@@ -54,7 +54,7 @@ def _line(text: str, needle: str) -> int:
             "modules[2].limits.position",
             "expected [low, high] with low <= high, got [0.2, 0]",
         ),
-        ("com: [0.0, 0.0, 0.1]", "com: [0.0, 0.1]", "modules[2].com", "expected a list of 3 numbers, got a list"),
+        ("com: [0.0, 0.0, 0.1]", "com: [0.0, 0.1]", "modules[2].com", "expected 3 numbers, got 2"),
         ("dof: [2, 5]", "dof: [2, five]", "grammar.dof", "item 1: expected a number, got the string 'five'"),
         ("id: L2\n", "id: L1\n", "modules[4].id", "duplicate module id 'L1' (first at modules[3])"),
         (
@@ -105,7 +105,7 @@ def test_missing_file(tmp_path):
 def test_top_level_must_be_a_mapping(tmp_path):
     path = tmp_path / "c.yaml"
     path.write_text("- a\n- b\n")
-    with pytest.raises(CatalogError, match=r"c.yaml:1: expected a mapping at the top level, got a list$"):
+    with pytest.raises(CatalogError, match=r"c.yaml:1: expected a mapping at the top level, got a list of 2 items$"):
         load_catalog(path)
 
 
@@ -153,7 +153,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
             "goal: [-2.0, -1.2, 0.6]",
             "goal: [-2.0, -1.2]",
             "goal:",
-            "task.goal: expected a list of 3 numbers, got a list",
+            "task.goal: expected 3 numbers, got 2",
         ),
         ("payload: 50.0", "payload: -5", "payload:", "task.payload: expected a number >= 0, got -5"),
         ("cost: time", "cost: energy", "cost:", "task.cost: expected one of time, effort; got 'energy'"),

@@ -123,6 +123,9 @@ class ShootingProblem:
         self.collision = None
         if self.obstacles and robot.moving_primitives():
             self.collision = CollisionModel(robot, self.obstacles, robot.moving_primitives())
+            if not self.collision.obstacles:  # every obstacle is out of reach
+                self.collision = None
+        if self.collision is not None:
             for label, q in (("q_start", self.q_start), ("q_goal", self.q_goal)):
                 if self.collision.min_distance(q) < 0.0:
                     raise ValueError(f"{label} is in collision with an obstacle")
@@ -246,7 +249,7 @@ class ShootingProblem:
         N, S, n, nv = self.intervals, self.substeps, self.nx, self.nv
         p = n + nv + 1
         cols = self._cols = np.array([self._interval_columns(m) for m in range(N)])
-        pairs = len(self.obstacles) if self.collision else 0
+        pairs = len(self.collision.obstacles) if self.collision else 0
         blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S, nv), ("clearance", S, pairs)]
         if not self.transcription.controls_are_torques:
             blocks.append(("torque", S + 1, nv))

@@ -1,0 +1,307 @@
+"""Every failure of input, signal, disk or neighbour ends in a clear message and an honest results
+folder: one test (or a few) per family of failure.
+
+The run-level tests use ``tests/data/small.yaml`` (516 compositions, 6 feasible); the signal and
+full-disk ones run the real command in a child process, as a user, a scheduler or ``timeout``
+would meet it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from modular_robots import Composition, InputError, ScenarioError, SphereObstacle, load_scenario
+from modular_robots._yamlio import load_yaml
+from modular_robots.cli import main
+from modular_robots.collision import CULL_DISTANCE, CollisionModel, reach_bound
+from modular_robots.folder import LOCK, ResultsFolder
+from modular_robots.pipeline import run_scenario
+from modular_robots.robot import robot_model
+
+from .conftest import ROOT
+
+SMALL = ROOT / "tests" / "data" / "small.yaml"
+SMALL_TEXT = SMALL.read_text()
+CLI = [str(Path(sys.executable).parent / "modular-robots")]
+
+
+def _scenario(tmp_path: Path, old: str = "", new: str = "", name: str = "s.yaml") -> Path:
+    assert old in SMALL_TEXT, old
+    path = tmp_path / name
+    text = SMALL_TEXT.replace(old, new, 1).replace("../../scenarios/", f"{ROOT}/scenarios/")
+    path.write_text(text)
+    return path
+
+
+def _document(out: Path) -> dict:
+    return json.loads((out / "result.json").read_text())
+
+
+def _leftovers(out: Path) -> list[str]:
+    """Files of the folder that its result.json does not account for."""
+    document = _document(out)
+    named = {"result.json", *((document.get("winner") or {}).get("files") or {}).values()}
+    return sorted(p.name for p in out.iterdir() if p.name not in named)
+
+
+def _processes_of(out: Path) -> list[int]:
+    """Processes whose command line names the results folder ``out`` (a run and its workers)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if str(out).encode() in (entry / "cmdline").read_bytes():
+                    found.append(int(entry.name))
+            except OSError:
+                pass
+    return found
+
+
+# -- 1. every termination is recorded ------------------------------------------------------------
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, signum):
+    out = tmp_path / "out"
+    child = subprocess.Popen(
+        [*CLI, "run", str(SMALL), "--jobs", "2", "--out", str(out)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and child.poll() is None:
+        try:
+            if "candidates" in _document(out)["counts"]:  # step C has started
+                break
+        except (OSError, ValueError):
+            pass
+        time.sleep(0.02)
+    child.send_signal(signum)
+    _, stderr = child.communicate(timeout=60)
+    name = signal.Signals(signum).name
+    assert child.returncode == 128 + signum, stderr
+    assert stderr.rstrip().splitlines()[-1] == f"Error: terminated by {name}"
+    document = _document(out)
+    assert document["status"] == "interrupted" and document["partial"] is True
+    assert document["message"].startswith(f"terminated by {name}")
+    assert document["counts"]["candidates"] == len(document["candidates"]) == 6
+    assert _leftovers(out) == []  # no lock, no temporary file
+    time.sleep(0.2)
+    assert _processes_of(out) == []  # no worker outlives the run
+
+
+@pytest.mark.parametrize(
+    ("error", "status", "message"),
+    [
+        (KeyboardInterrupt(), "interrupted", "interrupted by the user"),
+        (OSError(28, "No space left on device"), "failed", "stopped by an error: No space left on device"),
+    ],
+)
+def test_an_ending_while_the_winner_files_are_written_leaves_none_of_them(
+    tmp_path, monkeypatch, error, status, message
+):
+    """The winner's URDF, trajectory and joints plot are written, then the pruning plot fails."""
+
+    def fail(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr("modular_robots.recorder.write_pruning_plot", fail)
+    with pytest.raises(type(error)):
+        run_scenario(load_scenario(SMALL), tmp_path, jobs=1)
+    document = _document(tmp_path)
+    assert (document["status"], document["winner"]) == (status, None)
+    assert document["message"].startswith(message)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["result.json"]
+
+
+def test_a_file_size_limit_ends_the_run_as_failed_with_a_sentence(tmp_path):
+    """``ulimit -f``: the writes that do not fit fail; the run says so in result.json (cut short
+    if need be) and in one line, and leaves no temporary file."""
+    out = tmp_path / "out"
+    limit = 40_000  # bytes: result.json's first writes fit, the candidates' histories do not
+
+    def limit_file_size():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    done = subprocess.run(
+        [*CLI, "run", str(SMALL), "--jobs", "1", "--out", str(out)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=limit_file_size,
+    )
+    assert done.returncode == 1, done.stderr
+    last = done.stderr.rstrip().splitlines()[-1]
+    assert last.startswith("Error: ") and "File too large" in last and "Traceback" not in done.stderr
+    document = _document(out)
+    assert document["status"] == "failed" and "File too large" in document["message"]
+    assert _leftovers(out) == []
+
+
+# -- 2 and 3. a folder holds one run's files, and one run at a time ---------------------------------
+def test_a_run_removes_the_previous_runs_winner_files(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "winner.urdf").write_text("<robot/>")
+    (out / "old-trajectory.csv").write_text("t\n")
+    (out / "notes.txt").write_text("mine")
+    (out / ".trajectory.csv.tmp").write_text("half")
+    (out / "result.json").write_text(json.dumps({"winner": {"files": {"trajectory": "old-trajectory.csv"}}}))
+    infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
+    result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(out)])
+    assert result.exit_code == 1 and "no composition is feasible" in result.output
+    assert _document(out)["status"] == "infeasible"
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "result.json"]  # the user's file stays
+
+
+def test_a_second_run_into_a_locked_folder_is_refused(tmp_path):
+    out = tmp_path / "out"
+    with ResultsFolder(out):
+        assert (out / LOCK).read_text() == f"{os.getpid()}\n"
+        result = CliRunner().invoke(main, ["run", str(SMALL), "--jobs", "1", "--out", str(out)])
+    assert result.exit_code == 1
+    assert result.output.splitlines()[-1] == (
+        f"Error: {out}: another run is writing into this results folder (process {os.getpid()}); "
+        "wait for it to end or choose another folder (--out)"
+    )
+    assert sorted(p.name for p in out.iterdir()) == []  # the lock is released, nothing was written
+
+
+def test_filter_checks_its_output_before_step_b(tmp_path):
+    not_a_folder = tmp_path / "file"
+    not_a_folder.write_text("")
+    result = CliRunner().invoke(main, ["filter", str(SMALL), "--jobs", "1", "--out", str(not_a_folder / "v.json")])
+    assert result.exit_code == 1 and "step B on" not in result.output
+    assert result.output.splitlines()[-1] == f"Error: {not_a_folder}: Not a directory"
+
+
+# -- 4. values that make no sense are refused where they are read --------------------------------
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            "goal: [-0.5, 0.9, 0.9]",
+            "goal: [0.9, 0.5, 1.1]",
+            "task.goal: the goal is 0 mm from the start; expected at least 1 mm (a task moves the payload)",
+        ),
+        (
+            "pruning:",
+            "optimizer:\n  nodes: 1000\npruning:",
+            "optimizer.nodes: expected an integer <= 100 (the solver's matrices are dense: memory and time grow "
+            "with the square of the problem's size), got 1000",
+        ),
+        ("payload: 1.0", "payload: 1.0e308", "task.payload: expected a number of magnitude at most 1e+09, got 1e+308"),
+        (
+            "payload: 1.0",
+            "payload: 1" + "0" * 400,
+            "task.payload: expected a number of magnitude at most 1e+09, got 1000",
+        ),
+        ("name: small", "name: ../x", "name: expected a name of at most 100 letters, digits, '.', '_' or '-'"),
+        ("name: small", "name: " + "x" * 300, "(it names the results folder), got 'xxxxx"),
+        ("threshold: 0.5", "threshold: 1.0e6\n  bogus: 1", "pruning.bogus: unknown key"),  # 1.0e6 read as a number
+    ],
+)
+def test_senseless_scenario_values_are_refused_with_the_key(tmp_path, old, new, message):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_scenario(tmp_path, old, new))
+    assert message in str(info.value)
+    assert len(str(info.value)) < 400
+
+
+def test_a_grammar_of_a_million_dof_is_refused_when_read(tmp_path):
+    catalog = (ROOT / "scenarios" / "catalogs" / "paper-4dof.yaml").read_text()
+    path = tmp_path / "c.yaml"
+    path.write_text(catalog.replace("dof: [2, 4]", "dof: [2, 1000000]"))
+    result = CliRunner().invoke(main, ["enumerate", str(path), "--count"])
+    assert result.exit_code == 1
+    assert result.output.endswith("grammar.dof: expected a maximum of at most 20, got 1e+06\n")
+
+
+def test_a_space_too_large_for_step_b_is_refused_with_its_count_and_an_estimate(tmp_path):
+    catalog = tmp_path / "c.yaml"
+    catalog.write_text((ROOT / "scenarios" / "catalogs" / "paper-4dof.yaml").read_text().replace("[2, 4]", "[2, 12]"))
+    scenario = _scenario(tmp_path, "catalog: ../../scenarios/catalogs/paper-4dof.yaml", "catalog: c.yaml")
+    result = CliRunner().invoke(main, ["run", str(scenario), "--jobs", "1", "--out", str(tmp_path / "out")])
+    assert result.exit_code == 1 and not (tmp_path / "out").exists()
+    assert result.output.splitlines()[-1] == (
+        "Error: the catalogue 'paper-4dof' allows 870,712,932 compositions (2 to 12 DOF); step B would take about "
+        "25.2 days on 1 core(s). Narrow its grammar (grammar.dof) or raise the limit of 1,000,000 (--max-compositions)"
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["urdf", "B-J1-L1-E1", "--scenario", str(SMALL), "-o", "x.urdf", "--payload", "nan"], "expected a finite"),
+        (["run", str(SMALL), "--threshold", "inf"], "got inf; to never prune, use --rule none"),
+        (["run", str(SMALL), "--out", ""], "expected a folder, got an empty name"),
+        (["run", str(SMALL), "--out", "r/" + "x" * 300], "a file or folder name is at most 255 bytes"),
+        (["export", ".", "--rate", "nan"], "expected a finite number, got nan"),
+    ],
+)
+def test_senseless_cli_values_are_refused(tmp_path, args, message):
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2 and message in result.output, result.output
+
+
+# -- 7. the CLI's last line is always a sentence ----------------------------------------------------
+def test_inputs_that_used_to_escape_as_tracebacks_end_in_one_line(tmp_path):
+    png = tmp_path / "c.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4)
+    two = tmp_path / "two.yaml"
+    two.write_text("name: a\n---\nname: b\n")
+    huge = "B-" + "J1-L1-" * 5000 + "E1"
+    cases = [
+        (["enumerate", str(png)], f"Error: {png}:1: expected UTF-8 text, got the byte 0x89 (is it a YAML file?)"),
+        (["enumerate", str(two)], f"Error: {two}:2: expected one YAML document, found a second one here (after '---')"),
+        (["urdf", huge, "--scenario", str(SMALL), "-o", str(tmp_path / "x.urdf")], "(30004 characters)"),
+    ]
+    for args, expected in cases:
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 1 and "Traceback" not in result.output, result.output
+        assert expected in result.output.splitlines()[-1]
+        assert len(result.output) < 600
+
+
+def test_yaml_merge_keys_may_override_and_own_duplicates_may_not(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text("base: &d {x: 1, y: 2}\nthis:\n  <<: *d\n  y: 3\n")
+    assert dict(load_yaml(path, InputError).raw("this")) == {"x": 1, "y": 3}
+    path.write_text("this:\n  y: 1\n  y: 3\n")
+    with pytest.raises(InputError, match=r"m.yaml:3: malformed YAML: duplicate key 'y'$"):
+        load_yaml(path, InputError)
+
+
+# -- 8. obstacles out of reach cost nothing -------------------------------------------------------
+def test_reach_bound_holds_and_far_obstacles_are_left_out(paper_catalog):
+    robot = robot_model(Composition.from_name("B-J1-L2-J1-L1-J2-L3-J1-L1-E2", paper_catalog), paper_catalog, 5.0)
+    bound = reach_bound(robot)
+    rng = np.random.default_rng(3)
+    farthest = 0.0
+    for q in rng.uniform(robot.lower, robot.upper, size=(300, robot.nq)):
+        a, b = robot.primitive_segments(q)
+        ends = np.maximum(np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1))
+        farthest = max(farthest, float(np.max(ends + [p.radius for p in robot.primitives])))
+    assert farthest <= bound <= 1.5 * farthest  # a bound, and not a useless one
+
+    near = SphereObstacle((0.6, 0.4, 1.2), 0.2)
+    far = [SphereObstacle((bound + CULL_DISTANCE + 0.3 + i, 0.0, 0.0), 0.25) for i in range(2000)]
+    culled = CollisionModel(robot, [*far[:1000], near, *far[1000:]])
+    assert culled.obstacles == (near,)
+    q = rng.uniform(robot.lower, robot.upper, size=(5, robot.nq))
+    alone = CollisionModel(robot, [near]).closest_many(q)[0]
+    assert np.array_equal(culled.closest_many(q)[0], alone)
+    every = CollisionModel(robot, far[:50], cull=False).closest_many(q)[0]
+    assert every.min() > CULL_DISTANCE  # what is left out is never closer than the cull distance
