@@ -1,5 +1,5 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
-runs only those (models, feasibility, ocp, pruning, margins, suite). RESULTS.md is rewritten at the end.
+runs only those (models, feasibility, ocp, ipopt, pruning, margins, suite). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -8,12 +8,22 @@ import sys
 
 from modular_robots.execution import single_threaded_blas
 
-from . import bench_feasibility, bench_margins, bench_models, bench_ocp, bench_pruning, bench_suite, results_md
+from . import (
+    bench_feasibility,
+    bench_ipopt,
+    bench_margins,
+    bench_models,
+    bench_ocp,
+    bench_pruning,
+    bench_suite,
+    results_md,
+)
 
 BENCHES = {
     "models": bench_models,
     "feasibility": bench_feasibility,
     "ocp": bench_ocp,
+    "ipopt": bench_ipopt,
     "pruning": bench_pruning,
     "margins": bench_margins,
     "suite": bench_suite,

@@ -112,11 +112,18 @@ def exact_vs_finite_difference() -> list[dict]:
     return rows
 
 
-def main() -> None:
-    scenario = load_scenario(SCENARIO)
+def benchmark_set(scenario):
+    """``(survivors, chosen)``: step B's survivors on ``scenario`` (fastest bound first) and the
+    benchmark's candidates among them (the named composition and the next fastest)."""
     survivors = sorted((v for v in filter_compositions(scenario) if v.passed), key=lambda v: v.time_bound)
     chosen = [v for v in survivors if v.composition.name == NAMED]
     chosen += [v for v in survivors if v.composition.name != NAMED][: SET_SIZE - 1]
+    return survivors, chosen
+
+
+def main() -> None:
+    scenario = load_scenario(SCENARIO)
+    survivors, chosen = benchmark_set(scenario)
 
     rows = []
     for verdict in chosen:

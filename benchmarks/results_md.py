@@ -88,6 +88,48 @@ def _suite_lines() -> list[str]:
     return out
 
 
+def _ipopt_lines() -> list[str]:
+    peer = _load("ipopt")
+    if not peer:
+        return []
+    s = peer["summary"]
+    lines = [
+        "## Step C beside the peer (CasADi + IPOPT on the same NLP)",
+        "",
+        "Each OCP benchmark candidate from the same start by trust-constr and by IPOPT (exact Hessian, "
+        "MUMPS, tolerances 1e-6, `acceptable_iter = 0`, adaptive barrier) on the same variables, scaling "
+        "and constraint rows (`benchmarks/casadi_peer.py`; equality to the project's rows is tested); "
+        "both optima re-integrated by the project's verification. IPOPT's set-up (symbolics, derivative "
+        "graphs) is apart from its solve time.",
+        "",
+        f"Median trust-constr / IPOPT solve time **{s['median_ratio']:.1f}x** "
+        f"({s['median_ratio_with_setup']:.2f}x with IPOPT's set-up); median "
+        f"{s['median_trust_constr_s']:.2f} s vs {s['median_ipopt_s']:.3f} s; iterations ratio "
+        f"{s['median_iterations_ratio']:.1f}x; verified: trust-constr {s['trust_constr_verified']} of "
+        f"{s['candidates']}, IPOPT {s['ipopt_verified']} of {s['candidates']}.",
+        "",
+        "| composition | trust-constr s | IPOPT s (+ set-up) | ratio | iterations | tf s | verified | IPOPT's miss |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in peer["rows"]:
+        v = r["ipopt_verification"]
+        miss = []
+        if v["min_clearance_m"] < 0:
+            miss.append(f"{-v['min_clearance_m'] * 1e3:.1f} mm into an obstacle")
+        if v.get("max_defect", 0) > 1e-3:
+            miss.append(f"defect {v['max_defect']:.2g}")
+        if v["terminal_error_mm"] > 1:
+            miss.append(f"tool {v['terminal_error_mm']:.1f} mm off")
+        lines.append(
+            f"| {r['composition']} | {r['trust_constr_s']:.2f} | {r['ipopt_s']:.3f} (+{r['ipopt_setup_s']:.2f}) | "
+            f"{r['ratio']:.1f}x | {r['trust_constr_iterations']} / {r['ipopt_iterations']} | "
+            f"{_fmt(r['trust_constr_tf_s'], 4)} / {_fmt(r['ipopt_tf_s'], 4)} | "
+            f"{r['trust_constr_verified']} / {r['ipopt_verified']} | {'; '.join(miss) or '-'} |"
+        )
+    lines.append("")
+    return lines
+
+
 def build() -> str:
     feasibility, ocp, pruning = _load("feasibility"), _load("ocp"), _load("pruning")
     lines = [
@@ -193,6 +235,7 @@ def build() -> str:
                 f"| {r['jacobian']} | {r['status']} | {r['iterations']} | {_fmt(r['seconds'])} | {_fmt(r['tf_s'], 5)} |"
             )
         lines.append("")
+    lines += _ipopt_lines()
     if pruning:
         lines += [
             "## Step D (pruning vs brute force)",

@@ -1,0 +1,98 @@
+"""The peer, side by side: each OCP benchmark candidate (``bench_ocp``'s set on paper-5kg) solved
+from the same starting point by the project's trust-constr and by CasADi + IPOPT on the same
+nonlinear program (:mod:`benchmarks.casadi_peer`); per candidate the solve times, iterations,
+costs, their ratio, and whether each optimum passes the project's own dense verification.
+
+IPOPT's time is the solver's alone; its set-up (symbolics, derivative graphs) is reported apart.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+
+from modular_robots import load_scenario
+from modular_robots.ocp.candidate import composition_problem
+from modular_robots.ocp.solver import ShootingSolver
+from modular_robots.ocp.verification import verify
+
+from ._common import table, write
+from .bench_ocp import SCENARIO, benchmark_set
+from .casadi_peer import solve_with_ipopt
+
+
+def _verification(problem, y) -> dict:
+    v = verify(problem, y)
+    return {
+        "passed": v.passed,
+        "terminal_error_mm": v.terminal_error * 1e3,
+        "min_clearance_m": v.min_clearance,
+        "velocity_ratio": v.velocity_ratio,
+        "torque_ratio": v.torque_ratio,
+        "max_defect": v.max_defect,
+        "position_excess": v.position_excess,
+    }
+
+
+def compare(scenario, verdict) -> dict:
+    """Both solvers on ``verdict``'s problem (the fastest boundary pair, the first sub-step count)."""
+    composition = verdict.composition
+    problem = composition_problem(
+        composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
+    )
+    start = time.perf_counter()
+    ours = ShootingSolver(problem).solve()
+    ours_s = time.perf_counter() - start
+    peer = solve_with_ipopt(problem)
+    ours_v = _verification(problem, ours.final.y) if ours.final is not None else {"passed": False}
+    peer_v = _verification(problem, peer.y)
+    return {
+        "composition": composition.name,
+        "dof": composition.dof,
+        "variables": problem.n_variables,
+        "constraints": problem.n_constraints,
+        "trust_constr_s": ours_s,
+        "ipopt_s": peer.solve_seconds,
+        "ipopt_setup_s": peer.setup_seconds,
+        "ratio": ours_s / peer.solve_seconds,
+        "ratio_with_setup": ours_s / (peer.solve_seconds + peer.setup_seconds),
+        "trust_constr_iterations": ours.iterations,
+        "ipopt_iterations": peer.iterations,
+        "trust_constr_status": ours.status,
+        "ipopt_status": peer.status,
+        "trust_constr_tf_s": ours.final.tf if ours.final is not None else None,
+        "ipopt_tf_s": peer.cost,
+        "trust_constr_verified": ours_v["passed"],
+        "ipopt_verified": peer_v["passed"],
+        "trust_constr_verification": ours_v,
+        "ipopt_verification": peer_v,
+    }
+
+
+def main() -> None:
+    scenario = load_scenario(SCENARIO)
+    _, chosen = benchmark_set(scenario)
+    rows = [compare(scenario, verdict) for verdict in chosen]
+    flat = [{k: v for k, v in r.items() if not isinstance(v, dict)} for r in rows]
+    print(table(flat))
+    summary = {
+        "candidates": len(rows),
+        "median_ratio": statistics.median(r["ratio"] for r in rows),
+        "median_ratio_with_setup": statistics.median(r["ratio_with_setup"] for r in rows),
+        "median_trust_constr_s": statistics.median(r["trust_constr_s"] for r in rows),
+        "median_ipopt_s": statistics.median(r["ipopt_s"] for r in rows),
+        "median_iterations_ratio": float(
+            np.median([r["trust_constr_iterations"] / max(r["ipopt_iterations"], 1) for r in rows])
+        ),
+        "trust_constr_verified": sum(r["trust_constr_verified"] for r in rows),
+        "ipopt_verified": sum(r["ipopt_verified"] for r in rows),
+    }
+    print(summary)
+    path = write("ipopt", rows, {"summary": summary})
+    print(f"-> {path}")
+
+
+if __name__ == "__main__":
+    main()
