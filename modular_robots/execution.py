@@ -127,9 +127,19 @@ class SerialEngine:
 _CONTEXT: Any = None
 
 
+def _quiet_worker_signals() -> None:
+    """In a worker: the parent decides when to stop (Ctrl-C or a closed terminal reach the whole
+    process group), and ``SIGTERM`` (the parent's shutdown) ends the worker at once, silently,
+    instead of the parent's handler inherited through ``fork``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _start_worker(context: Any) -> None:
     global _CONTEXT
     _CONTEXT = context
+    _quiet_worker_signals()
     threadpool_limits(limits=1)
 
 
@@ -235,7 +245,7 @@ class InProcessExecutor:
 
 
 def _worker(conn, factory, context, specs, names) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop (Ctrl-C)
+    _quiet_worker_signals()
     threadpool_limits(limits=1)
     executor = InProcessExecutor(factory, context, specs, names)
     try:

@@ -25,6 +25,16 @@ __all__ = ["ResultsFolder", "FolderBusyError", "atomic_write", "atomic_path", "c
 LOCK = ".lock"
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+#: Files are created with the permissions ``open()`` would give them (``mkstemp`` gives 0600).
+_MODE = 0o666 & ~_umask()
+
+
 class FolderBusyError(ModularRobotsError):
     """Another run holds the results folder's lock."""
 
@@ -35,6 +45,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     normally, removed when it raises."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
+    os.fchmod(fd, _MODE)
     os.close(fd)
     try:
         yield Path(tmp)

@@ -16,6 +16,9 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
+
+from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
 from .exceptions import CompositionError, InfeasibleError, Terminated
 from .execution import make_engine, make_executor, single_threaded_blas
@@ -43,6 +46,7 @@ __all__ = [
     "optimize_composition",
     "run_scenario",
     "track_winner",
+    "winner_approach",
     "with_pruning",
 ]
 
@@ -150,16 +154,15 @@ def run_scenario(
         # in the order of their bounds: the order they are admitted in, and (round robin) the
         # workers' shares, so that the candidates iterating together are spread over the workers
         specs = sorted(candidate_specs(survivors), key=lambda spec: (bounds[spec.name], spec.name))
-        executor = make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs)
-        manager = PruningManager(executor, scenario.pruning, bounds=bounds)
-        recorder.update(counts={"optimized": len(survivors), "candidates": len(specs)})
         optimization_start = time.perf_counter()
         rounds = 0
-
-        by_name = {spec.name: spec for spec in specs}
+        manager = None
 
         def record(every: float = 0.0) -> list[CandidateResult]:
-            results = [_labelled(r, by_name[r.name]) for r in manager.results.values()]
+            done = manager.results if manager is not None else {}
+            results = [
+                _labelled(done.get(spec.name) or CandidateResult.never_started(spec.name), spec) for spec in specs
+            ]
             recorder.update(
                 counts=_status_counts(results),
                 results=results,
@@ -168,19 +171,28 @@ def run_scenario(
             )
             return results
 
-        try:
+        executor = make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs)
+        try:  # from here on, any ending stops the workers and records every candidate
+            manager = PruningManager(executor, scenario.pruning, bounds=bounds)
+            recorder.update(counts={"optimized": len(survivors), "candidates": len(specs)})
             for progress in manager.rounds():
                 rounds = progress.round
                 notify("optimization", _progress_figures(progress, len(specs)))
                 record(every=1.0)
         finally:
+            executor.shutdown()
             results = record()
         winner = _winner(results)
         if winner is None:
             reasons = "; ".join(f"{r.name}: {r.reason}" for r in results[:3])
             recorder.finish("failed", f"every candidate failed ({reasons})")
             raise InfeasibleError(f"no candidate converged to a verified trajectory ({reasons})")
-        recorder.record_winner(winner, f"{scenario.name}: rule {scenario.pruning.rule}", track_winner(winner))
+        recorder.record_winner(
+            winner,
+            f"{scenario.name}: rule {scenario.pruning.rule}",
+            track_winner(winner),
+            winner_approach(winner, scenario),
+        )
         recorder.finish("done")
         return RunResult(tuple(results), winner, summary, rounds, dict(recorder.seconds))
 
@@ -262,7 +274,7 @@ def optimize_composition(
             reason = "; ".join(f"{r.name}: {r.reason}" for r in results)
             recorder.finish("failed", reason)
             raise InfeasibleError(reason)
-        recorder.record_winner(winner, tracking=track_winner(winner))
+        recorder.record_winner(winner, tracking=track_winner(winner), approach=winner_approach(winner, scenario))
         recorder.finish("done")
         return RunResult(tuple(results), winner, summary, 0, dict(recorder.seconds))
 
@@ -272,6 +284,18 @@ def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
     if result.composition:
         return result
     return replace(result, composition=spec.composition.name, boundary_pair=spec.boundary_pair)
+
+
+def winner_approach(result: CandidateResult, scenario: Scenario, samples: int = 401) -> Approach | None:
+    """Where an optimal result's plan comes closest to an obstacle, on ``samples`` instants of its
+    trajectory (:func:`~modular_robots.collision.closest_approach`); None without obstacles."""
+    if not scenario.task.obstacles:
+        return None
+    composition = Composition.from_name(result.composition or result.name, scenario.catalog)
+    robot = robot_model(composition, scenario.catalog, scenario.task.payload)
+    times = np.linspace(0.0, float(result.trajectory.t[-1]), samples)
+    collision = CollisionModel(robot, scenario.task.obstacles)
+    return closest_approach(collision, times, result.trajectory.at(times)[0], scenario.task.obstacles)
 
 
 def track_winner(result: CandidateResult) -> Tracking:
