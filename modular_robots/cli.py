@@ -31,6 +31,7 @@ from .pipeline import optimize_composition, run_scenario, with_pruning
 from .report import RESULT, export_controller_rate
 from .scenario import RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
+from .viewer import write_viewer
 
 __all__ = ["main"]
 
@@ -387,6 +388,18 @@ def export_command(results: Path, rate: float) -> None:
     contract and a ROS JointTrajectory JSON."""
     files = export_controller_rate(results, rate)
     click.echo(f"wrote {files['csv']} and {files['json']}")
+
+
+@main.command("view")
+@click.argument("results", type=click.Path(exists=True, file_okay=False, path_type=Path), metavar="RESULTS_DIR")
+@click.option("--open", "open_page", is_flag=True, help="Open the page in the default browser.")
+@_user_errors
+def view_command(results: Path, open_page: bool) -> None:
+    """Write RESULTS_DIR/winner.html (the winner moving around the obstacles, offline, one file)."""
+    path = results / write_viewer(results)
+    click.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
+    if open_page:
+        click.launch(str(path))
 
 
 def _written(out: Path) -> str:

@@ -17,7 +17,16 @@ import pinocchio as pin
 from .robot import RobotModel
 from .scenario import SphereObstacle
 
-__all__ = ["CollisionModel", "Distances", "PATH_CLEARANCE", "CULL_DISTANCE", "penetration", "reach_bound"]
+__all__ = [
+    "CollisionModel",
+    "Distances",
+    "Approach",
+    "closest_approach",
+    "PATH_CLEARANCE",
+    "CULL_DISTANCE",
+    "penetration",
+    "reach_bound",
+]
 
 #: Clearance a joint-space path must keep from every obstacle to count as clear [m] (step C's
 #: initial guess).
@@ -200,6 +209,38 @@ class CollisionModel:
     def in_collision(self, q: np.ndarray) -> bool:
         """True if any primitive touches or overlaps any obstacle."""
         return self.min_distance(q) <= 0.0
+
+
+@dataclass(frozen=True)
+class Approach:
+    """Where a motion comes closest to an obstacle: the signed ``clearance`` [m] at time ``t``
+    [s], between the robot primitive ``primitive`` and ``obstacle`` (its index in the list given)."""
+
+    clearance: float
+    t: float
+    primitive: str
+    obstacle: int
+
+    def to_json(self) -> dict:
+        return {"clearance": self.clearance, "t": self.t, "primitive": self.primitive, "obstacle": self.obstacle}
+
+
+def closest_approach(
+    collision: CollisionModel, times: np.ndarray, qs: np.ndarray, obstacles: Sequence[SphereObstacle]
+) -> Approach | None:
+    """The closest approach of the motion ``qs`` ``(K, nv)`` at ``times`` ``(K,)`` [s] to the
+    obstacles of ``collision``, reported against the full list ``obstacles`` (None: none in reach)."""
+    if not collision.obstacles:
+        return None
+    best = None
+    for t, q in zip(times, qs):
+        d = collision.distances(q).distance
+        i, j = np.unravel_index(int(np.argmin(d)), d.shape)
+        if best is None or d[i, j] < best[0]:
+            best = (float(d[i, j]), float(t), i, j)
+    clearance, t, i, j = best
+    name = collision.robot.primitives[collision.primitive_indices[i]].name
+    return Approach(clearance, t, name, list(obstacles).index(collision.obstacles[j]))
 
 
 def reach_bound(robot: RobotModel) -> float:

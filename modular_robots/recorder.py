@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .collision import Approach
 from .exceptions import Terminated
 from .execution import terminations_raise
 from .folder import ResultsFolder, atomic_write
@@ -29,6 +30,7 @@ from .ocp.tracking import Tracking
 from .ocp.trajectory import Trajectory
 from .report import RESULT, WINNER_FILES, write_pruning_plot, write_winner_files
 from .scenario import Scenario
+from .viewer import VIEWER, write_viewer
 
 __all__ = ["RunRecorder", "RESULT", "STATUSES"]
 
@@ -118,11 +120,16 @@ class RunRecorder:
             self._write()
 
     def record_winner(
-        self, winner: CandidateResult, pruning_plot_title: str | None = None, tracking: Tracking | None = None
+        self,
+        winner: CandidateResult,
+        pruning_plot_title: str | None = None,
+        tracking: Tracking | None = None,
+        approach: Approach | None = None,
     ) -> dict:
-        """Write the winner's files (URDF, trajectory, plots) and its block of the document;
-        return the files' names. ``pruning_plot_title``: also plot every candidate's history;
-        ``tracking``: the closed-loop check of its plan."""
+        """Write the winner's files (URDF, trajectory, plots, the 3D page) and its block of the
+        document; return the files' names. ``pruning_plot_title``: also plot every candidate's
+        history; ``tracking``: the closed-loop check of its plan; ``approach``: where it comes
+        closest to an obstacle."""
         files = {}
         if self.path is not None:
             start = time.perf_counter()
@@ -130,11 +137,15 @@ class RunRecorder:
                 files = write_winner_files(self.path, winner)
                 if pruning_plot_title is not None:
                     files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
+                self.winner = _winner_json(winner, files, tracking, approach)
+                self._write()  # the page is drawn from the folder's files, result.json included
+                files["viewer"] = write_viewer(self.path)
             except BaseException:  # no winner file without a result.json that names it
-                self._folder.remove(WINNER_FILES)
+                self.winner = None
+                self._folder.remove((*WINNER_FILES, VIEWER))
                 raise
             self.seconds["report"] = time.perf_counter() - start
-        self.winner = _winner_json(winner, files, tracking)
+        self.winner = _winner_json(winner, files, tracking, approach)
         return files
 
     def finish(self, status: str, message: str = "") -> None:
@@ -166,6 +177,7 @@ class RunRecorder:
             "partial": self.status in ("running", "interrupted"),
             "message": self.message,
             "settings": self.settings,
+            "task": _task_json(self.scenario),
             "counts": self.counts,
             "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
             "candidates": [r.to_json() for r in self.results],
@@ -186,6 +198,17 @@ class RunRecorder:
         self._last_write = time.perf_counter()
         if self.path is not None:
             atomic_write(self.path / RESULT, json.dumps(self.document(), indent=1, allow_nan=False) + "\n")
+
+
+def _task_json(scenario: Scenario) -> dict:
+    task = scenario.task
+    return {
+        "payload": task.payload,
+        "start": list(task.start),
+        "goal": list(task.goal),
+        "obstacles": [{"center": list(o.center), "radius": o.radius} for o in task.obstacles],
+        "cost": task.cost,
+    }
 
 
 def _previous_files(folder: Path) -> list[str]:
@@ -215,7 +238,9 @@ def _describe(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
-def _winner_json(result: CandidateResult, files: dict, tracking: Tracking | None) -> dict:
+def _winner_json(
+    result: CandidateResult, files: dict, tracking: Tracking | None, approach: Approach | None = None
+) -> dict:
     trajectory = result.trajectory
     return {
         "composition": result.composition or result.name,
@@ -230,6 +255,7 @@ def _winner_json(result: CandidateResult, files: dict, tracking: Tracking | None
         "verification": result.verification.to_json() if result.verification else None,
         "limits_used": _limits_used(trajectory) if trajectory is not None else None,
         "tracking": tracking.to_json() if tracking is not None else None,
+        "closest_approach": approach.to_json() if approach is not None else None,
         "drive": result.drive,
         "files": files,
     }

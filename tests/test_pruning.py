@@ -964,7 +964,13 @@ def test_small_result_json(small_run_1):
     verification = winner["verification"]
     assert verification["passed"] is True
     assert verification["terminal_error"] <= 0.01 and verification["min_clearance"] >= 0.0
-    assert set(winner["files"].values()) == {"winner.urdf", "trajectory.csv", "joints.png", "pruning.png"}
+    assert set(winner["files"].values()) == {
+        "winner.urdf",
+        "trajectory.csv",
+        "joints.png",
+        "pruning.png",
+        "winner.html",
+    }
     for name in winner["files"].values():
         assert (out / name).is_file()
     assert not list(out.glob(".*"))  # no temporary files left behind

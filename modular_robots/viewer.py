@@ -1,0 +1,206 @@
+"""``winner.html``: the winner moving around the obstacles, in one self-contained page.
+
+The page is written from the results folder alone (``result.json``, ``winner.urdf``,
+``trajectory.csv``), so ``modular-robots view RESULTS_DIR`` can rebuild it at any time. The robot
+is the URDF's collision geometry (a cylinder in the URDF stands for a capsule) posed by yourdfpy's
+forward kinematics along the plan's acceleration contract; three.js (r147, MIT, vendored in
+``viewer_assets/``) draws it. Everything the page needs is inlined: it opens from the file system,
+offline, and makes no request.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import yourdfpy
+
+from .exceptions import InputError
+from .folder import atomic_write
+from .ocp.trajectory import Trajectory
+from .report import RESULT
+from .robot import robot_from_urdf
+
+__all__ = ["VIEWER", "write_viewer", "scene_data", "FRAME_RATE"]
+
+VIEWER = "winner.html"
+#: Frames per second of motion stored in the page (the player shows the nearest frame).
+FRAME_RATE = 60.0
+#: At most this many frames, whatever the motion's length.
+MAX_FRAMES = 1200
+#: Colours by module kind (first letter of the module id), for the links of the URDF.
+_COLOURS = {"B": "#6c757d", "J": "#f0a202", "L": "#2f6db5", "E": "#8e44ad", "payload": "#c9a227"}
+
+
+def write_viewer(folder: str | Path) -> str:
+    """Write ``winner.html`` into the results folder ``folder`` from its files; return its name.
+
+    Raises
+    ------
+    InputError
+        If the folder has no winner (no ``result.json`` winner, URDF or trajectory).
+    """
+    folder = Path(folder)
+    try:
+        document = json.loads((folder / RESULT).read_text())
+        files = document["winner"]["files"]
+        urdf_path, trajectory_path = folder / files["urdf"], folder / files["trajectory"]
+        trajectory = Trajectory.read_csv(trajectory_path)
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{folder}: no winner to show ({exc})") from None
+    scene = scene_data(urdf_path, trajectory, document)
+    atomic_write(folder / VIEWER, page(scene, panel(document), f"{document['winner']['candidate']} — modular-robots"))
+    return VIEWER
+
+
+def scene_data(urdf_path: Path, trajectory: Trajectory, document: dict) -> dict:
+    """What the page draws: per link its shapes and per frame its pose, the tool path, the
+    obstacles with the clearance margin, the start and goal. Poses are 4x4 matrices, column-major
+    (three.js's order), in the base frame [m]."""
+    urdf = yourdfpy.URDF.load(str(urdf_path), load_meshes=False)
+    joints = robot_from_urdf(urdf_path.read_text()).joint_names
+    tf = float(trajectory.t[-1])
+    count = int(min(MAX_FRAMES, max(2, np.ceil(tf * FRAME_RATE) + 1)))
+    times = np.linspace(0.0, tf, count)
+    qs = trajectory.at(times)[0]
+    links = [link for link in urdf.link_map.values() if link.collisions]
+    frames = []
+    for q in qs:
+        urdf.update_cfg(dict(zip(joints, q)))
+        frames.append([_columns(urdf.get_transform(link.name, urdf.base_link)) for link in links])
+    tool = np.column_stack([np.interp(times, trajectory.t, trajectory.tool[:, k]) for k in range(3)])
+    task = document.get("task") or {}
+    return {
+        "tf": tf,
+        "times": _round(times),
+        "links": [{"name": link.name, "color": _colour(link.name), "shapes": _shapes(link)} for link in links],
+        "frames": frames,
+        "tool": _round(tool),
+        "obstacles": task.get("obstacles", []),
+        "margin": (document.get("settings") or {}).get("optimizer", {}).get("clearance_margin", 0.0),
+        "start": task.get("start"),
+        "goal": task.get("goal"),
+    }
+
+
+def _shapes(link) -> list[dict]:
+    out = []
+    for collision in link.collisions:
+        geometry, origin = collision.geometry, _columns(collision.origin)
+        if geometry.cylinder is not None:
+            out.append(
+                {
+                    "type": "capsule",
+                    "radius": geometry.cylinder.radius,
+                    "length": geometry.cylinder.length,
+                    "origin": origin,
+                }
+            )
+        elif geometry.sphere is not None:
+            out.append({"type": "sphere", "radius": geometry.sphere.radius, "origin": origin})
+        elif geometry.box is not None:
+            out.append({"type": "box", "size": [float(v) for v in geometry.box.size], "origin": origin})
+    return out
+
+
+def _colour(link: str) -> str:
+    if link == "payload":
+        return _COLOURS["payload"]
+    module = link.split("_", 1)[1] if link.startswith("m") and "_" in link else link
+    return _COLOURS.get(module[:1].upper(), _COLOURS["B"])
+
+
+def _columns(matrix: np.ndarray) -> list[float]:
+    return _round(np.asarray(matrix, dtype=float).T.ravel())
+
+
+def _round(values: np.ndarray) -> list:
+    return np.round(np.asarray(values, dtype=float), 5).tolist()
+
+
+# -- the panel ------------------------------------------------------------------------------------
+def panel(document: dict) -> str:
+    """The winner's figures and the candidates' ranking, as HTML."""
+    w = document["winner"]
+    e = html.escape
+    rows = [
+        ("tf", f"{w['tf']:.4f} s"),
+        (f"cost ({(document.get('settings') or {}).get('cost', '')})", f"{w['cost']:.4g}"),
+    ]
+    approach = w.get("closest_approach")
+    if approach:
+        rows.append(
+            (
+                "closest approach",
+                f"{approach['clearance'] * 1000:.1f} mm at t = {approach['t']:.3f} s, "
+                f"{approach['primitive']} to obstacle {approach['obstacle'] + 1}",
+            )
+        )
+    verification = w.get("verification") or {}
+    if verification:
+        rows.append(("tool error at tf", f"{verification.get('terminal_error', 0) * 1000:.3f} mm"))
+    used = w.get("limits_used") or {}
+    if used:
+        rows.append(("torque use per joint", " ".join(f"{100 * u:.0f}%" for u in used.get("effort", []))))
+        rows.append(("speed use per joint", " ".join(f"{100 * u:.0f}%" for u in used.get("velocity", []))))
+    figures = "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in rows)
+    ranking = _ranking(document.get("candidates") or [], w["candidate"])
+    return (
+        f"<h1>{e(w['composition'])}</h1><p class='sub'>{e(document.get('scenario', ''))}: the winner "
+        f"({e(w.get('boundary_pair', ''))} boundary pair)</p><table class='figures'>{figures}</table>"
+        f"<p class='sub'>{_legend()}</p><h2>Candidates</h2>{ranking}"
+    )
+
+
+def _legend() -> str:
+    kinds = (("B", "base"), ("J", "joint module"), ("L", "link"), ("E", "effector"), ("payload", "payload"))
+    swatches = " ".join(f"<span style='color:{_COLOURS[k]}'>&#9632;</span> {name}" for k, name in kinds)
+    return (
+        f"{swatches}; <span style='color:#d9534f'>&#9679;</span> obstacles (mesh: the clearance margin), "
+        "<span style='color:#16a34a'>&#9679;</span> start, <span style='color:#222'>&#9679;</span> goal, "
+        "line: the tool's path"
+    )
+
+
+def _ranking(candidates: list[dict], winner: str, limit: int = 60) -> str:
+    def key(c):
+        return (c["status"] != "optimal", c["cost"] if c["cost"] is not None else np.inf, c["candidate"])
+
+    ranked = sorted(candidates, key=key)
+    e = html.escape
+    lines = ["<table class='ranking'><tr><th>#</th><th>candidate</th><th>status</th><th>cost</th><th>iterations</th>"]
+    for rank, c in enumerate(ranked[:limit], 1):
+        cost = "-" if c["cost"] is None else f"{c['cost']:.4g}"
+        status = c["status"] + (f" at {c['pruned_at_iteration']}" if c.get("pruned_at_iteration") is not None else "")
+        mark = " class='winner'" if c["candidate"] == winner else ""
+        lines.append(
+            f"<tr{mark}><td>{rank}</td><td>{e(c['candidate'])}</td><td>{e(status)}</td><td>{cost}</td>"
+            f"<td>{c['iterations']}</td></tr>"
+        )
+    lines.append("</table>")
+    if len(ranked) > limit:
+        lines.append(f"<p class='sub'>… and {len(ranked) - limit} more (result.json)</p>")
+    return "".join(lines)
+
+
+# -- the page -------------------------------------------------------------------------------------
+def _asset(name: str) -> str:
+    return resources.files("modular_robots.viewer_assets").joinpath(name).read_text(encoding="utf-8")
+
+
+def page(scene: dict, panel_html: str, title: str) -> str:
+    """The whole page: styles, the panel, the player, three.js and the scene, inlined."""
+    data = json.dumps(scene, separators=(",", ":")).replace("</", "<\\/")
+    return (
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
+        f"<title>{html.escape(title)}</title><style>{_asset('viewer.css')}</style></head><body>"
+        f"<div id='view'></div><aside id='panel'>{panel_html}</aside>"
+        "<div id='player'><button id='play' type='button'>Pause</button>"
+        "<input id='time' type='range' min='0' max='1000' value='0' step='1'><span id='clock'></span></div>"
+        f"<script type='application/json' id='scene-data'>{data}</script>"
+        f"<script>{_asset('three.min.js')}</script><script>{_asset('OrbitControls.js')}</script>"
+        f"<script>{_asset('viewer.js')}</script></body></html>\n"
+    )

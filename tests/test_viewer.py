@@ -1,0 +1,111 @@
+"""``winner.html``: the page a run leaves, checked for what it shows (the plan's own motion, from
+the URDF by an independent forward kinematics) and in a real browser (headless Chromium, from a
+``file://`` URL: no console error, no network request, the robot moves between t = 0 and tf)."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from modular_robots import load_scenario
+from modular_robots.cli import main
+from modular_robots.ocp.trajectory import Trajectory
+from modular_robots.pipeline import run_scenario
+from modular_robots.viewer import VIEWER, scene_data
+
+from .conftest import ROOT
+
+SMALL = ROOT / "tests" / "data" / "small.yaml"
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+#: As root, headless, with WebGL on SwiftShader and none of Chromium's own network traffic.
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("viewer")
+    run_scenario(load_scenario(SMALL), out, jobs=1)
+    return out
+
+
+def test_the_run_writes_the_page_and_names_it(folder):
+    document = json.loads((folder / "result.json").read_text())
+    assert document["winner"]["files"]["viewer"] == VIEWER
+    assert 0.3e6 < (folder / VIEWER).stat().st_size < 3e6  # three.js inlined, and still small
+
+
+def test_view_rebuilds_the_same_page_from_the_folder(folder, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    (copy / VIEWER).unlink()
+    result = CliRunner().invoke(main, ["view", str(copy)])
+    assert result.exit_code == 0, result.output
+    assert (copy / VIEWER).read_bytes() == (folder / VIEWER).read_bytes()
+
+
+def test_the_scene_carries_the_payload_from_start_to_goal(folder):
+    """yourdfpy's forward kinematics of the URDF along the plan put the payload link on the task's
+    start at t = 0 and on its goal at tf (Pinocchio planned it: two libraries agree)."""
+    document = json.loads((folder / "result.json").read_text())
+    scene = scene_data(folder / "winner.urdf", Trajectory.read_csv(folder / "trajectory.csv"), document)
+    payload = [link["name"] for link in scene["links"]].index("payload")
+    first, last = (np.array(scene["frames"][k][payload]).reshape(4, 4).T[:3, 3] for k in (0, -1))
+    assert np.linalg.norm(first - document["task"]["start"]) < 1e-4
+    assert np.linalg.norm(last - document["task"]["goal"]) < 1e-4
+    assert scene["times"][-1] == pytest.approx(document["winner"]["tf"], abs=1e-5)
+
+
+def test_the_closest_approach_is_the_verified_clearance(folder):
+    winner = json.loads((folder / "result.json").read_text())["winner"]
+    approach = winner["closest_approach"]
+    assert approach["obstacle"] == 0 and 0 <= approach["t"] <= winner["tf"]
+    # 401 instants against the verification's dense grid: the same minimum within a few mm
+    assert approach["clearance"] == pytest.approx(winner["verification"]["min_clearance"], abs=5e-3)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no Chromium (.ci/run installs Debian's chromium)")
+def test_the_page_in_headless_chromium(folder, tmp_path):
+    from PIL import Image
+    from playwright.sync_api import sync_playwright
+
+    errors, requests = [], []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1200, "height": 760})
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.on("request", lambda r: requests.append(r.url))
+            page.goto((folder / VIEWER).as_uri())
+            page.wait_for_function("window.viewer && window.viewer.ready", timeout=20_000)
+            shots = []
+            for t in ("0", "viewer.tf"):
+                page.evaluate(f"viewer.setTime({t})")
+                shots.append(page.locator("#view canvas").screenshot(path=str(tmp_path / f"t{len(shots)}.png")))
+            clock = page.inner_text("#clock")
+        finally:
+            browser.close()
+    assert errors == []
+    assert requests == [(folder / VIEWER).as_uri()]  # the page itself, nothing else
+    tf = json.loads((folder / "result.json").read_text())["winner"]["tf"]
+    assert clock == f"{tf:.3f} / {tf:.3f} s"
+    start, end = (np.asarray(Image.open(io.BytesIO(s)).convert("RGB"), dtype=int) for s in shots)
+    for image in (start, end):
+        assert len(np.unique(image.reshape(-1, 3), axis=0)) > 200  # a drawn scene, not a blank canvas
+    moved = np.any(np.abs(start - end) > 30, axis=2).mean()
+    assert moved > 0.01, moved  # the robot's pixels moved between t = 0 and tf
