@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 # Steps A to E on the paper's task with a 5 kg payload; the results folder is results/paper-5kg/.
 run: install
 	$(VENV)/bin/modular-robots run scenarios/paper-5kg.yaml --out results/paper-5kg
-	@echo "results: $(CURDIR)/results/paper-5kg/ (result.json, winner.urdf, trajectory.csv, joints.png, pruning.png)"
+	@echo "results: $(CURDIR)/results/paper-5kg/ (result.json, winner.urdf, trajectory.csv, joints.png, pruning.png, winner.html)"
 
 # Lint, format and import layers first (seconds), then the tests.
 test: install
