@@ -89,7 +89,7 @@ class PruningSettings:
     rule: str = "ratio"
     threshold: float = 0.5
     start_iteration: int = 2
-    window: int = 8
+    window: int = 16
     lookahead: float = 2.0
     patience: int = 75
     #: What the ratio is taken against: ``trusted`` (the best trusted iterate or verified cost) or

@@ -252,6 +252,6 @@ def test_shipped_scenarios_load():
         0.5,
         2,
     )
-    assert (paper.pruning.window, paper.pruning.lookahead, paper.pruning.patience) == (8, 2.0, 75)  # defaults
+    assert (paper.pruning.window, paper.pruning.lookahead, paper.pruning.patience) == (16, 2.0, 75)  # defaults
     five = load_scenario(PAPER_SCENARIO.with_name("paper-5kg.yaml"))
     assert five.task.payload == 5.0 and five.task.obstacles == paper.task.obstacles and five.catalog == paper.catalog

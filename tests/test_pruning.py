@@ -927,7 +927,7 @@ def test_small_result_json(small_run_1):
         "rule": "ratio",
         "threshold": 0.5,
         "start_iteration": 2,
-        "window": 8,
+        "window": 16,
         "lookahead": 2.0,
         "patience": 75,
         "reference": "verified",
