@@ -7,7 +7,9 @@ error names the file, the line, the key path and what was expected.
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -76,14 +78,14 @@ _LineLoader.add_implicit_resolver(
 def load_yaml(path: Path, error: type[InputError]) -> Fields:
     """Parse a YAML file whose top level is a mapping; return its :class:`Fields`."""
     try:
-        size = Path(path).stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise error(
-                f"{path}: the file has {size} bytes; expected a scenario or catalogue of at most {MAX_FILE_BYTES}"
-            )
-        data = Path(path).read_bytes()
+        if not stat.S_ISREG(os.stat(path).st_mode):  # a FIFO would block, /dev/zero never ends
+            raise error(f"{path}: expected a regular file (a scenario or catalogue), got a device, pipe or folder")
+        with open(path, "rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise error(f"{path}: cannot read file: {exc.strerror or exc}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise error(f"{path}: the file has more than {MAX_FILE_BYTES} bytes; a scenario or catalogue is smaller")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -93,6 +95,8 @@ def load_yaml(path: Path, error: type[InputError]) -> Fields:
         ) from None
     try:
         data = yaml.load(text, Loader=_LineLoader)
+    except RecursionError:
+        raise error(f"{path}: the YAML is nested too deeply to be a scenario or catalogue") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)

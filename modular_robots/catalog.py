@@ -147,6 +147,15 @@ def catalog_from_fields(top: Fields) -> Catalog:
     return Catalog(name=name, modules=tuple(modules), grammar=grammar, source=str(top.path))
 
 
+#: Bounds on a module's numbers (SI units), beyond which no module of a buildable robot lies and
+#: the arithmetic of steps B and C breaks down (e.g. a 1e9 m link makes IK's systems singular).
+MAX_SIZE = 10.0  # length, diameter [m]
+MAX_MASS = 1e5  # [kg]
+MAX_ARMATURE = 1e3  # [kg m^2 | kg]
+MAX_POSITION = 100.0  # joint limits [rad | m]
+MIN_VELOCITY, MAX_VELOCITY = 1e-3, 1e3  # [rad/s | m/s]
+MAX_EFFORT = 1e6  # [N m | N]
+
 #: The largest DOF a grammar may ask for: longer chains are not robots anyone builds from modules,
 #: and the count of compositions grows as (modules per slot) ** DOF.
 MAX_DOF = 20
@@ -188,17 +197,20 @@ def _read_module(f: Fields) -> Module:
     else:
         joint = "fixed"
         f.check("joint", not f.has("joint"), f"a {kind} module has no joint; remove the key")
-    length = f.number("length", default=0.0, minimum=0.0)
-    diameter = f.number("diameter", exclusive_minimum=0.0)
+    length = f.number("length", default=0.0, minimum=0.0, maximum=MAX_SIZE)
+    diameter = f.number("diameter", exclusive_minimum=0.0, maximum=MAX_SIZE)
     # a base may be massless (it never moves); a moving module may not
-    mass = f.number("mass", default=0.0, minimum=0.0) if kind == "base" else f.number("mass", exclusive_minimum=0.0)
+    if kind == "base":
+        mass = f.number("mass", default=0.0, minimum=0.0, maximum=MAX_MASS)
+    else:
+        mass = f.number("mass", exclusive_minimum=0.0, maximum=MAX_MASS)
     com, inertia = _read_inertia(f, mass, diameter, length)
     limits = None
     if joint != "fixed":
         limits = _read_limits(f.mapping("limits"), joint)
     else:
         f.check("limits", not f.has("limits"), "a module without a joint has no limits; remove the key")
-    armature = f.number("armature", default=0.0, minimum=0.0)
+    armature = f.number("armature", default=0.0, minimum=0.0, maximum=MAX_ARMATURE)
     collision = f.string("collision", default="capsule" if kind == "link" else "sphere", choices=COLLISION_SHAPES)
     twist_in = math.radians(f.number("twist_in_deg", default=0.0))
     twist_out = math.radians(f.number("twist_out_deg", default=0.0))
@@ -237,20 +249,48 @@ def _read_inertia(f: Fields, mass: float, diameter: float, length: float):
             "expected solid_cylinder, [ixx, iyy, izz] or [ixx, iyy, izz, ixy, ixz, iyz] in kg m^2",
         )
     moments = tuple(moments) + (0.0,) * (6 - len(moments))
-    ixx, iyy, izz = moments[:3]
-    valid = min(ixx, iyy, izz) > 0 and ixx + iyy >= izz and iyy + izz >= ixx and izz + ixx >= iyy
     f.check(
         "inertia",
-        valid,
-        f"expected positive principal moments that satisfy the triangle inequality, got {list(moments[:3])}",
+        _physical_inertia(moments),
+        "expected a positive definite inertia whose principal moments satisfy the triangle inequality "
+        f"(no moment above the sum of the other two), got {list(moments)}",
     )
     return com, moments
+
+
+def _physical_inertia(moments: tuple[float, ...]) -> bool:
+    """True for a rotational inertia a rigid body can have: positive definite, and its largest
+    principal moment at most the sum of the other two (half the trace)."""
+    ixx, iyy, izz, ixy, ixz, iyz = moments
+    det = ixx * (iyy * izz - iyz * iyz) - ixy * (ixy * izz - iyz * ixz) + ixz * (ixy * iyz - iyy * ixz)
+    if not (ixx > 0 and ixx * iyy - ixy * ixy > 0 and det > 0):
+        return False
+    return _largest_eigenvalue(moments) <= 0.5 * (ixx + iyy + izz) * (1.0 + 1e-9)
+
+
+def _largest_eigenvalue(moments: tuple[float, ...]) -> float:
+    """The largest eigenvalue of the symmetric 3 x 3 matrix ``moments`` (closed form)."""
+    ixx, iyy, izz, ixy, ixz, iyz = moments
+    off = ixy * ixy + ixz * ixz + iyz * iyz
+    if off == 0.0:
+        return max(ixx, iyy, izz)
+    q = (ixx + iyy + izz) / 3.0
+    p = math.sqrt(((ixx - q) ** 2 + (iyy - q) ** 2 + (izz - q) ** 2 + 2.0 * off) / 6.0)
+    a, b, c = (ixx - q) / p, (iyy - q) / p, (izz - q) / p
+    d, e, g = ixy / p, ixz / p, iyz / p
+    r = 0.5 * (a * (b * c - g * g) - d * (d * c - g * e) + e * (d * g - b * e))
+    return q + 2.0 * p * math.cos(math.acos(max(-1.0, min(1.0, r))) / 3.0)
 
 
 def _read_limits(f: Fields, joint: str) -> JointLimits:
     lower, upper = f.interval("position")
     f.check("position", lower < upper, f"expected [lower, upper] with lower < upper, got [{lower:g}, {upper:g}]")
-    velocity = f.number("velocity", exclusive_minimum=0.0)
-    effort = f.number("effort", exclusive_minimum=0.0)
+    f.check(
+        "position",
+        max(abs(lower), abs(upper)) <= MAX_POSITION,
+        f"expected limits within +-{MAX_POSITION:g} (rad or m), got [{lower:g}, {upper:g}]",
+    )
+    velocity = f.number("velocity", minimum=MIN_VELOCITY, maximum=MAX_VELOCITY)
+    effort = f.number("effort", exclusive_minimum=0.0, maximum=MAX_EFFORT)
     f.done()
     return JointLimits(lower=lower, upper=upper, velocity=velocity, effort=effort)

@@ -14,7 +14,7 @@ from pathlib import Path
 import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
-from .exceptions import ModularRobotsError, Terminated, shorten
+from .exceptions import InfeasibleError, ModularRobotsError, Terminated, shorten
 from .execution import make_engine, terminations_raise
 from .feasibility import (
     MAX_COMPOSITIONS,
@@ -29,7 +29,7 @@ from .folder import atomic_write, check_writable
 from .ocp.candidate import BoundaryPair
 from .pipeline import optimize_composition, run_scenario, with_pruning
 from .report import RESULT, export_controller_rate
-from .scenario import RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
+from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
 from .viewer import write_viewer
 
@@ -50,7 +50,10 @@ def _user_errors(command):
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
         except ModularRobotsError as exc:
-            raise click.ClickException(str(exc)) from None
+            first, _, details = str(exc).partition("\n")
+            if details:  # a diagnosis: its details first, the sentence last
+                click.echo(details, err=True)
+            raise click.ClickException(first) from None
         except Terminated as exc:
             _fail(str(exc), 128 + exc.signum)
         except KeyboardInterrupt:
@@ -93,8 +96,8 @@ class _Number(click.ParamType):
             self.fail(f"expected a number, got {shorten(value)}", param, ctx)
         if not math.isfinite(number):
             self.fail(f"expected a finite number, got {value}{self.hint}", param, ctx)
-        if self.positive and number <= self.minimum:
-            self.fail(f"expected a number > {self.minimum:g}, got {number:g}", param, ctx)
+        if self.positive and not self.minimum < number <= self.maximum:
+            self.fail(f"expected a number in ({self.minimum:g}, {self.maximum:g}], got {number:g}", param, ctx)
         if not self.minimum <= number <= self.maximum:
             self.fail(f"expected a number in [{self.minimum:g}, {self.maximum:g}], got {number:g}", param, ctx)
         return number
@@ -112,6 +115,8 @@ def _folder_name(ctx, param, text: str | None) -> Path | None:
             raise click.BadParameter(f"{shorten(part)}: a file or folder name is at most 255 bytes")
     if value.exists() and not value.is_dir():
         raise click.BadParameter(f"{shorten(value, 200, quote=False)} exists and is not a folder")
+    if value.resolve() == Path(value.resolve().anchor):
+        raise click.BadParameter("the filesystem's root; expected a results folder")
     return value
 
 
@@ -183,6 +188,14 @@ def enumerate_command(source: Path, count: bool, dof: int | None) -> None:
 @_user_errors
 def urdf_command(composition: str, source: Path, payload: float | None, output: Path) -> None:
     """Write the URDF of COMPOSITION (e.g. B-J1-L2-E1), payload at tool0."""
+    if not str(output).strip() or output.is_dir():
+        raise click.BadParameter("expected a file name for the URDF", param_hint="-o/--output")
+    if "+" in composition:
+        raise click.BadParameter(
+            f"{shorten(composition)}: a '+clear' or '+fastest' suffix names a candidate of `optimize`; "
+            "a URDF is of a composition",
+            param_hint="COMPOSITION",
+        )
     scenario, catalog = load_scenario_or_catalog(source)
     if payload is None:
         payload = scenario.task.payload if scenario else 0.0
@@ -203,7 +216,7 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 )
 @click.option(
     "--seeds",
-    type=click.IntRange(min=1),
+    type=click.IntRange(min=1, max=1000),
     default=FeasibilitySettings.seeds,
     show_default=True,
     help="IK start configurations per target.",
@@ -223,9 +236,9 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None,
     settings = FeasibilitySettings(seeds=seeds)
     engine = make_engine(jobs)
     if out is not None:
-        if out.is_dir():
+        if out.exists() and not out.is_file():  # a folder, or a device a rename would replace
             raise click.BadParameter(
-                f"{shorten(out, 200, quote=False)} is a folder; expected a JSON file name", param_hint="--out"
+                f"{shorten(out, 200, quote=False)} is not a regular file; expected a JSON file name", param_hint="--out"
             )
         check_writable(out.parent)
     total = _space(scenario, engine.jobs, max_compositions)
@@ -253,7 +266,7 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None,
         )
         click.echo(f"wrote {out}")
     if not summary.survivors:
-        raise click.ClickException(summary.diagnosis())
+        raise InfeasibleError(summary.diagnosis())
 
 
 @main.command("optimize")
@@ -271,7 +284,10 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None,
     "--transcription", type=click.Choice(TRANSCRIPTIONS), default=None, help="Override the scenario's transcription."
 )
 @click.option(
-    "--max-iterations", type=click.IntRange(min=1), default=None, help="Override the scenario's iteration limit."
+    "--max-iterations",
+    type=click.IntRange(min=1, max=MAX_ITERATIONS),
+    default=None,
+    help="Override the scenario's iteration limit.",
 )
 @_user_errors
 def optimize_command(

@@ -354,6 +354,12 @@ def composition_space(catalog: Catalog, max_compositions: int = MAX_COMPOSITIONS
         wall time on ``jobs`` cores, before any work starts.
     """
     total = sum(count_compositions(catalog).values())
+    if total == 0:
+        low, high = catalog.grammar.dof
+        raise InputError(
+            f"the catalogue {catalog.name!r} allows no composition (grammar.dof [{low}, {high}] with its modules); "
+            "nothing to check"
+        )
     if total > max_compositions:
         low, high = catalog.grammar.dof
         raise InputError(

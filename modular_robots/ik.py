@@ -115,6 +115,8 @@ def _lm_step(jacobian: np.ndarray, error_vector: np.ndarray, error: float) -> np
     x, y, z = error_vector.tolist()
     co_a, co_b, co_c = d * f - e * e, c * e - b * f, b * e - c * d
     det = a * co_a + b * co_b + c * co_c
+    if not det > 0.0:  # only for absurd geometry (metres beyond 1e8): no step rather than a crash
+        return np.zeros(jacobian.shape[1])
     u = (co_a * x + co_b * y + co_c * z) / det
     v = (co_b * x + (a * f - c * c) * y + (b * c - a * e) * z) / det
     w = (co_c * x + (b * c - a * e) * y + (a * d - b * b) * z) / det

@@ -213,7 +213,7 @@ def _task_json(scenario: Scenario) -> dict:
 
 def _previous_files(folder: Path) -> list[str]:
     """The files a previous run left in ``folder``: its winner's files and controller-rate exports."""
-    names = set(WINNER_FILES)
+    names = {*WINNER_FILES, VIEWER, "trajectory.json"}
     with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
         names.update(json.loads((folder / RESULT).read_text())["winner"]["files"].values())
     with contextlib.suppress(OSError):

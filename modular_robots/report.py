@@ -14,13 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .exceptions import InputError
+from .exceptions import InputError, shorten
 from .folder import atomic_path, atomic_write
 from .ocp.candidate import CandidateResult, CandidateStatus
 from .ocp.trajectory import Trajectory, controller_rate, joint_trajectory
 from .robot import robot_from_urdf
 
 __all__ = [
+    "read_winner",
     "plot_joints",
     "plot_pruning_history",
     "write_pruning_plot",
@@ -80,16 +81,15 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     InputError
         If the folder has no winner to export.
     """
+    document, urdf, trajectory = read_winner(folder)
+    winner = document["winner"]
     folder = Path(folder)
     try:
-        document = json.loads((folder / RESULT).read_text())
-        winner = document["winner"]
-        files = winner["files"]
-        urdf = (folder / files["urdf"]).read_text()
-        trajectory = Trajectory.read_csv(folder / files["trajectory"])
-    except (OSError, KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{folder}: no exported winner to resample ({exc})") from None
-    robot = robot_from_urdf(urdf, (winner.get("drive") or {}).get("armature"))
+        robot = robot_from_urdf(urdf, (winner.get("drive") or {}).get("armature"))
+    except (ValueError, RuntimeError, TypeError) as exc:
+        raise InputError(f"{folder}: the winner's URDF cannot be loaded ({shorten(exc, 120, quote=False)})") from None
+    if robot.nv != trajectory.nv:
+        raise InputError(f"{folder}: the winner's URDF has {robot.nv} joints, its trajectory {trajectory.nv}")
     resampled = controller_rate(trajectory, robot, rate)
     csv_path = folder / f"trajectory_{rate:g}hz.csv"
     with atomic_path(csv_path) as tmp:
@@ -97,6 +97,43 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     json_path = folder / "trajectory.json"
     atomic_write(json_path, json.dumps(joint_trajectory(resampled, robot.joint_names)) + "\n")
     return {"csv": csv_path, "json": json_path}
+
+
+def read_winner(folder: str | Path) -> tuple[dict, str, Trajectory]:
+    """``(result.json's document, winner.urdf's text, the trajectory)`` of the results folder
+    ``folder``, for what is made from a finished run (``export``, ``view``).
+
+    Raises
+    ------
+    InputError
+        Naming the file and what is wrong: no or unreadable ``result.json``, no winner (with the
+        run's status), a missing winner file, or a ``trajectory.csv`` that breaks its contract.
+    """
+    folder = Path(folder)
+    path = folder / RESULT
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{folder}: no {RESULT}; expected the results folder of a run") from None
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise InputError(f"{path}: expected the JSON a run writes ({shorten(exc, 120, quote=False)})") from None
+    winner = document.get("winner") if isinstance(document, dict) else None
+    if not isinstance(winner, dict):
+        status = document.get("status") if isinstance(document, dict) else None
+        raise InputError(f"{path}: no winner to read (the run's status is {status!r})")
+    files = winner.get("files") if isinstance(winner.get("files"), dict) else {}
+    names = {kind: files.get(kind) for kind in ("urdf", "trajectory")}
+    for kind, name in names.items():
+        if not isinstance(name, str) or not name or "/" in name or not (folder / name).is_file():
+            raise InputError(f"{path}: winner.files.{kind}: expected a file of this folder, got {shorten(name)}")
+    try:
+        urdf = (folder / names["urdf"]).read_text(encoding="utf-8")
+        trajectory = Trajectory.read_csv(folder / names["trajectory"])
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{folder}: cannot read the winner's files ({shorten(exc, 120, quote=False)})") from None
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    return document, urdf, trajectory
 
 
 def write_pruning_plot(folder: Path, results: Sequence[CandidateResult], winner: str | None, title: str = "") -> str:

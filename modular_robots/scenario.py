@@ -137,8 +137,12 @@ def _scenario_from_fields(top: Fields) -> Scenario:
     )
     top.string("description", default="")
     catalog_path = path.parent / top.string("catalog")
-    if not catalog_path.is_file():
+    if not catalog_path.exists():
         raise top.fail("catalog", f"no catalogue file at {catalog_path}")
+    if not catalog_path.is_file():
+        raise top.fail("catalog", f"{catalog_path} is not a regular file")
+    if catalog_path.resolve() == path.resolve():
+        raise top.fail("catalog", "the scenario names itself as its catalogue; expected a catalogue file")
     catalog = load_catalog(catalog_path)
     task = _read_task(top.mapping("task"))
     optimizer = _read_optimizer(top.mapping("optimizer", default=None))
@@ -198,7 +202,7 @@ def _read_optimizer(f: Fields | None) -> OptimizerSettings:
         tolerance=f.number("tolerance", default=d.tolerance, exclusive_minimum=0.0),
         constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance, exclusive_minimum=0.0),
         transcription=f.string("transcription", default=d.transcription, choices=TRANSCRIPTIONS),
-        clearance_margin=f.number("clearance_margin", default=d.clearance_margin, minimum=0.0),
+        clearance_margin=f.number("clearance_margin", default=d.clearance_margin, minimum=0.0, maximum=1.0),
         effort_margin=f.number("effort_margin", default=d.effort_margin, exclusive_minimum=0.0, maximum=1.0),
         velocity_margin=f.number("velocity_margin", default=d.velocity_margin, exclusive_minimum=0.0, maximum=1.0),
     )

@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import yourdfpy
 
-from .exceptions import InputError
+from .exceptions import InputError, shorten
 from .folder import atomic_write
 from .ocp.trajectory import Trajectory
-from .report import RESULT
+from .report import read_winner
 from .robot import robot_from_urdf
 
 __all__ = ["VIEWER", "write_viewer", "scene_data", "FRAME_RATE"]
@@ -41,17 +41,15 @@ def write_viewer(folder: str | Path) -> str:
     Raises
     ------
     InputError
-        If the folder has no winner (no ``result.json`` winner, URDF or trajectory).
+        If the folder has no readable winner (:func:`~modular_robots.report.read_winner`).
     """
     folder = Path(folder)
+    document, _, trajectory = read_winner(folder)
+    urdf_path = folder / document["winner"]["files"]["urdf"]
     try:
-        document = json.loads((folder / RESULT).read_text())
-        files = document["winner"]["files"]
-        urdf_path, trajectory_path = folder / files["urdf"], folder / files["trajectory"]
-        trajectory = Trajectory.read_csv(trajectory_path)
-    except (OSError, KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{folder}: no winner to show ({exc})") from None
-    scene = scene_data(urdf_path, trajectory, document)
+        scene = scene_data(urdf_path, trajectory, document)
+    except (ValueError, RuntimeError, TypeError, KeyError, AttributeError) as exc:
+        raise InputError(f"{urdf_path}: cannot pose the winner ({shorten(exc, 120, quote=False)})") from None
     atomic_write(folder / VIEWER, page(scene, panel(document), f"{document['winner']['candidate']} — modular-robots"))
     return VIEWER
 

@@ -61,7 +61,21 @@ def _line(text: str, needle: str) -> int:
             "inertia: [2.0e-3, 2.0e-3, 0.65e-3]\n    limits: {position: [0.0, 0.2]",
             "inertia: [2.0e-3, 2.0e-3, 5.0e-3]\n    limits: {position: [0.0, 0.2]",
             "modules[2].inertia",
-            "expected positive principal moments that satisfy the triangle inequality, got [0.002, 0.002, 0.005]",
+            "expected a positive definite inertia whose principal moments satisfy the triangle inequality "
+            "(no moment above the sum of the other two), got [0.002, 0.002, 0.005, 0.0, 0.0, 0.0]",
+        ),
+        (  # the diagonal passes, the matrix is not positive definite (the probe's case)
+            "inertia: [2.0e-3, 2.0e-3, 0.65e-3]\n    limits: {position: [0.0, 0.2]",
+            "inertia: [2.0e-3, 2.0e-3, 2.0e-3, 1.0, 1.0, 1.0]\n    limits: {position: [0.0, 0.2]",
+            "modules[2].inertia",
+            "expected a positive definite inertia whose principal moments satisfy the triangle inequality "
+            "(no moment above the sum of the other two), got [0.002, 0.002, 0.002, 1.0, 1.0, 1.0]",
+        ),
+        (
+            "kind: link                # Rx(+90°) Tz(0.75): along the previous frame's -y\n    length: 0.75",
+            "kind: link\n    length: 1.0e9",
+            "modules[3].length",
+            "expected a number <= 10, got 1e+09",
         ),
     ],
     ids=[
@@ -76,6 +90,8 @@ def _line(text: str, needle: str) -> int:
         "bad-grammar",
         "duplicate-id",
         "unphysical-inertia",
+        "inertia-not-positive-definite",
+        "absurd-length",
     ],
 )
 def test_catalog_errors_name_file_line_key(tmp_path, old, new, key, message):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -305,3 +306,80 @@ def test_reach_bound_holds_and_far_obstacles_are_left_out(paper_catalog):
     assert np.array_equal(culled.closest_many(q)[0], alone)
     every = CollisionModel(robot, far[:50], cull=False).closest_many(q)[0]
     assert every.min() > CULL_DISTANCE  # what is left out is never closer than the cull distance
+
+
+# -- found by a hostile-input probe: special files, damaged results folders -----------------------
+def test_special_files_are_refused_without_reading_them(tmp_path):
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)  # opening it for reading would block until a writer comes
+    for source in (Path("/dev/zero"), fifo):
+        result = CliRunner().invoke(main, ["enumerate", str(source), "--count"])
+        assert result.exit_code == 1
+        assert result.output == (
+            f"Error: {source}: expected a regular file (a scenario or catalogue), got a device, pipe or folder\n"
+        )
+    result = CliRunner().invoke(main, ["filter", str(SMALL), "--jobs", "1", "--out", str(fifo)])
+    assert result.exit_code == 2 and "is not a regular file" in result.output
+    assert not fifo.is_file()  # still a FIFO: the rename of a temporary file did not replace it
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("finished")
+    run_scenario(load_scenario(SMALL), out, jobs=1)
+    return out
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda rows: rows[:1], "trajectory.csv: expected at least 2 rows (t = 0 and t = tf), got 0"),
+        (lambda rows: rows[:2], "trajectory.csv: expected at least 2 rows (t = 0 and t = tf), got 1"),
+        (
+            lambda rows: rows[:3] + [rows[3].replace(rows[3].split(",")[2], "nan", 1)] + rows[4:],
+            "trajectory.csv:4: column q2: expected a finite number, got nan",
+        ),
+        (
+            lambda rows: rows[:5] + ["99" + rows[5][rows[5].index(",") :]] + rows[6:],
+            "trajectory.csv:7: column t: expected times from 0 that increase row by row",
+        ),
+        (
+            lambda rows: rows[:4] + [rows[4].rsplit(",", 1)[0]] + rows[5:],
+            "trajectory.csv:5: expected 20 values, got 19",
+        ),
+    ],
+    ids=["header-only", "one-row", "nan", "time-backwards", "short-row"],
+)
+def test_export_and_view_refuse_a_damaged_trajectory_naming_row_and_column(finished, tmp_path, damage, message):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    rows = (folder / "trajectory.csv").read_text().splitlines()
+    (folder / "trajectory.csv").write_text("\n".join(damage(rows)) + "\n")
+    for command in (["export", str(folder)], ["view", str(folder)]):
+        result = CliRunner().invoke(main, command)
+        assert result.exit_code == 1, result.output
+        assert result.output == f"Error: {folder}/{message}\n"
+    assert not (folder / "trajectory.json").exists()
+
+
+def test_export_of_a_run_without_winner_says_so(finished, tmp_path):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    document = _document(folder)
+    (folder / "result.json").write_text(json.dumps({**document, "status": "failed", "winner": None}))
+    result = CliRunner().invoke(main, ["export", str(folder)])
+    assert result.output == f"Error: {folder}/result.json: no winner to read (the run's status is 'failed')\n"
+    (folder / "result.json").write_text("[1, 2]")
+    result = CliRunner().invoke(main, ["view", str(folder)])
+    assert result.output == f"Error: {folder}/result.json: no winner to read (the run's status is None)\n"
+
+
+def test_a_new_run_removes_the_old_runs_exports(finished, tmp_path):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    assert CliRunner().invoke(main, ["export", str(folder), "--rate", "100"]).exit_code == 0
+    assert {"trajectory_100hz.csv", "trajectory.json"} <= {p.name for p in folder.iterdir()}
+    infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
+    result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(folder)])
+    assert result.exit_code == 1
+    assert sorted(p.name for p in folder.iterdir()) == ["result.json"]

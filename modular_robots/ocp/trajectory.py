@@ -87,15 +87,46 @@ class Trajectory:
     @classmethod
     def read_csv(cls, path) -> Trajectory:
         """Read a file written by :meth:`write_csv` with its ``qdd`` columns (the acceleration
-        contract)."""
-        with open(path) as f:
-            header = f.readline().strip().split(",")
-        table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        contract).
+
+        Raises
+        ------
+        ValueError
+            Naming the file, the row and the column, for a header other than
+            ``t,q1..qn,qd1..qdn,qdd1..qddn,tau1..taun,x,y,z``, a cell that is not a finite number,
+            fewer than two rows, or times that do not start at 0 and increase.
+        """
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+        header = lines[0].strip().split(",") if lines else []
         nv = (len(header) - 4) // 4
-        if len(header) != 4 * nv + 4 or header != ["t", *Trajectory.header_names(nv), "x", "y", "z"]:
+        if nv < 1 or header != ["t", *Trajectory.header_names(nv), "x", "y", "z"]:
             raise ValueError(
-                f"{path}: expected the header t,q1..qn,qd1..qdn,qdd1..qddn,tau1..taun,x,y,z, got {','.join(header)}"
+                f"{path}:1: expected the header t,q1..qn,qd1..qdn,qdd1..qddn,tau1..taun,x,y,z, "
+                f"got {','.join(header)[:200]!r}"
             )
+        rows = []
+        for number, line in enumerate(lines[1:], start=2):
+            cells = line.split(",")
+            if len(cells) != len(header):
+                raise ValueError(f"{path}:{number}: expected {len(header)} values, got {len(cells)}")
+            try:
+                row = [float(c) for c in cells]
+            except ValueError:
+                raise ValueError(f"{path}:{number}: expected numbers, got {line[:80]!r}") from None
+            bad = [header[k] for k, v in enumerate(row) if not math.isfinite(v)]
+            if bad:
+                raise ValueError(
+                    f"{path}:{number}: column {bad[0]}: expected a finite number, got {row[header.index(bad[0])]}"
+                )
+            rows.append(row)
+        if len(rows) < 2:
+            raise ValueError(f"{path}: expected at least 2 rows (t = 0 and t = tf), got {len(rows)}")
+        table = np.array(rows)
+        steps = np.diff(table[:, 0])
+        if table[0, 0] != 0.0 or not np.all(steps > 0.0):
+            row = 2 if table[0, 0] != 0.0 else int(np.argmax(steps <= 0.0)) + 3
+            raise ValueError(f"{path}:{row}: column t: expected times from 0 that increase row by row")
         blocks = [table[:, 1 + k * nv : 1 + (k + 1) * nv] for k in range(4)]
         return cls(table[:, 0], *blocks, table[:, -3:])
 
