@@ -4,16 +4,17 @@ The pipeline, one module per stage, data flowing one way: :mod:`~modular_robots.
 :mod:`~modular_robots.scenario` (the input files) → :mod:`~modular_robots.composition` (step A)
 → :mod:`~modular_robots.urdf`, :mod:`~modular_robots.robot` and :mod:`~modular_robots.collision`
 (the models) → :mod:`~modular_robots.feasibility` (step B) → :mod:`modular_robots.ocp` (step C)
-→ :mod:`~modular_robots.pruning` (step D) → :mod:`~modular_robots.report` and
-:mod:`~modular_robots.recorder` (step E); :func:`run_scenario` chains them all and
-:mod:`~modular_robots.execution` decides where work runs. Units are SI (m, kg, s, N, N m) and
+→ :mod:`~modular_robots.pruning` (step D) → :mod:`~modular_robots.report`,
+:mod:`~modular_robots.viewer` and :mod:`~modular_robots.recorder` (step E); :func:`run_scenario`
+chains them all, :mod:`~modular_robots.execution` decides where work runs and
+:mod:`~modular_robots.folder` keeps a results folder honest (one run, whole files). Units are SI (m, kg, s, N, N m) and
 radians throughout.
 """
 
 import logging
 
 from .catalog import Catalog, Grammar, JointLimits, Module, load_catalog
-from .collision import CollisionModel, Distances
+from .collision import Approach, CollisionModel, Distances, closest_approach
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import (
     CatalogError,
@@ -22,6 +23,7 @@ from .exceptions import (
     InputError,
     ModularRobotsError,
     ScenarioError,
+    Terminated,
 )
 from .execution import InProcessExecutor, ProcessEngine, ProcessExecutor, SerialEngine, make_engine, make_executor
 from .feasibility import (
@@ -29,8 +31,10 @@ from .feasibility import (
     FeasibilitySummary,
     Verdict,
     check_composition,
+    composition_space,
     filter_compositions,
 )
+from .folder import FolderBusyError, ResultsFolder
 from .ocp import (
     BoundaryPair,
     Candidate,
@@ -51,13 +55,16 @@ from .ocp import (
 from .pipeline import RunResult, candidate_specs, optimize_composition, run_scenario
 from .pruning import PruningManager, RoundCosts, ratio_rule
 from .recorder import RunRecorder
+from .report import export_controller_rate, read_winner
 from .robot import Primitive, RobotModel, robot_model
 from .scenario import OptimizerSettings, PruningSettings, Scenario, SphereObstacle, Task, load_scenario
 from .urdf import composition_urdf, write_urdf
+from .viewer import write_viewer
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Approach",
     "BoundaryPair",
     "Candidate",
     "CandidateResult",
@@ -69,6 +76,9 @@ __all__ = [
     "Composition",
     "CompositionError",
     "Distances",
+    "FolderBusyError",
+    "ResultsFolder",
+    "Terminated",
     "FeasibilitySettings",
     "FeasibilitySummary",
     "Grammar",
@@ -102,6 +112,11 @@ __all__ = [
     "Verification",
     "candidate_specs",
     "check_composition",
+    "closest_approach",
+    "composition_space",
+    "export_controller_rate",
+    "read_winner",
+    "write_viewer",
     "composition_problem",
     "composition_urdf",
     "count_compositions",
