@@ -70,7 +70,10 @@ class CollisionModel:
     ):
         self.robot = robot
         reach = reach_bound(robot) + CULL_DISTANCE if cull else np.inf
-        self.obstacles = tuple(o for o in obstacles if np.linalg.norm(o.center) - o.radius <= reach)
+        near = [i for i, o in enumerate(obstacles) if np.linalg.norm(o.center) - o.radius <= reach]
+        self.obstacles = tuple(obstacles[i] for i in near)
+        #: For each obstacle kept, its index in the list given.
+        self.given_index = tuple(near)
         self.primitive_indices = tuple(range(len(robot.primitives)) if primitives is None else primitives)
         self._primitives = [robot.primitives[i] for i in self.primitive_indices]
         self._frame_ids = [int(robot.model.getFrameId(p.frame)) for p in self._primitives]
@@ -225,11 +228,9 @@ class Approach:
         return {"clearance": self.clearance, "t": self.t, "primitive": self.primitive, "obstacle": self.obstacle}
 
 
-def closest_approach(
-    collision: CollisionModel, times: np.ndarray, qs: np.ndarray, obstacles: Sequence[SphereObstacle]
-) -> Approach | None:
+def closest_approach(collision: CollisionModel, times: np.ndarray, qs: np.ndarray) -> Approach | None:
     """The closest approach of the motion ``qs`` ``(K, nv)`` at ``times`` ``(K,)`` [s] to the
-    obstacles of ``collision``, reported against the full list ``obstacles`` (None: none in reach)."""
+    obstacles of ``collision`` (the index is in the list it was given; None: none in reach)."""
     if not collision.obstacles:
         return None
     best = None
@@ -240,7 +241,7 @@ def closest_approach(
             best = (float(d[i, j]), float(t), i, j)
     clearance, t, i, j = best
     name = collision.robot.primitives[collision.primitive_indices[i]].name
-    return Approach(clearance, t, name, list(obstacles).index(collision.obstacles[j]))
+    return Approach(clearance, t, name, collision.given_index[j])
 
 
 def reach_bound(robot: RobotModel) -> float:

@@ -20,6 +20,7 @@ velocity-limited lower bound on motion time are kept for step C.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import time
@@ -194,7 +195,7 @@ def _collision_check(collision: CollisionModel, q: np.ndarray, label: str) -> _C
     i, j = np.unravel_index(int(np.argmin(distances.distance)), distances.distance.shape)
     clearance = float(distances.distance[i, j])
     name = collision.robot.primitives[i].name
-    message = f"collision: {name} {-clearance:.3g} m inside obstacle {j + 1} ({label})"
+    message = f"collision: {name} {-clearance:.3g} m inside obstacle {collision.given_index[j] + 1} ({label})"
     return _Check(clearance > 0.0, clearance, message)
 
 
@@ -232,7 +233,8 @@ def check_composition(
 
     t0 = time.perf_counter()
     robot = robot_model(composition, catalog, task.payload)
-    collision = CollisionModel(robot, task.obstacles)
+    # built on first use: most compositions fail IK or torque before a collision is measured
+    collision = functools.cache(lambda: CollisionModel(robot, task.obstacles))
     seeds = ik_seeds(robot, settings.seeds)
     clock.time("model", t0)
 
@@ -254,9 +256,9 @@ def check_composition(
             tests_passed, _, message = outcome.closest
             return fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
         passing[label] = outcome.kept
-    (q_start, q_goal), clear = _boundary_pair(robot, collision, passing["start"], passing["goal"])
+    (q_start, q_goal), clear = _boundary_pair(robot, collision(), passing["start"], passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
-    figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
+    figures["clearance"] = min(collision().min_distance(q) for q in (q_start, q_goal))
     return Verdict(
         composition,
         None,
@@ -302,7 +304,7 @@ def _target(robot, collision, target, label, seeds, settings, clock, earlier=Non
             outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
             continue
         t0 = time.perf_counter()
-        clear = _collision_check(collision, q, label)
+        clear = _collision_check(collision(), q, label)
         clock.time(COLLISION.name, t0)
         if not clear.passed:
             outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))

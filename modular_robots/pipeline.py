@@ -295,7 +295,7 @@ def winner_approach(result: CandidateResult, scenario: Scenario, samples: int = 
     robot = robot_model(composition, scenario.catalog, scenario.task.payload)
     times = np.linspace(0.0, float(result.trajectory.t[-1]), samples)
     collision = CollisionModel(robot, scenario.task.obstacles)
-    return closest_approach(collision, times, result.trajectory.at(times)[0], scenario.task.obstacles)
+    return closest_approach(collision, times, result.trajectory.at(times)[0])
 
 
 def track_winner(result: CandidateResult) -> Tracking:

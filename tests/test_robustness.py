@@ -300,7 +300,7 @@ def test_reach_bound_holds_and_far_obstacles_are_left_out(paper_catalog):
     near = SphereObstacle((0.6, 0.4, 1.2), 0.2)
     far = [SphereObstacle((bound + CULL_DISTANCE + 0.3 + i, 0.0, 0.0), 0.25) for i in range(2000)]
     culled = CollisionModel(robot, [*far[:1000], near, *far[1000:]])
-    assert culled.obstacles == (near,)
+    assert culled.obstacles == (near,) and culled.given_index == (1000,)
     q = rng.uniform(robot.lower, robot.upper, size=(5, robot.nq))
     alone = CollisionModel(robot, [near]).closest_many(q)[0]
     assert np.array_equal(culled.closest_many(q)[0], alone)
