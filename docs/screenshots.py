@@ -13,23 +13,15 @@ from pathlib import Path
 
 from playwright.sync_api import sync_playwright
 
+from modular_robots.viewer import HEADLESS_CHROMIUM
+
 DOCS = Path(__file__).resolve().parent
-ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 
 
 def main(folder: Path) -> None:
     page_path = folder / "winner.html"
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=ARGS)
+        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=list(HEADLESS_CHROMIUM))
         page = browser.new_page(viewport={"width": 1280, "height": 760})
         start = time.perf_counter()
         page.goto(page_path.resolve().as_uri())

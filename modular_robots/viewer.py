@@ -24,13 +24,25 @@ from .ocp.trajectory import Trajectory
 from .report import read_winner
 from .robot import robot_from_urdf
 
-__all__ = ["VIEWER", "write_viewer", "scene_data", "FRAME_RATE"]
+__all__ = ["VIEWER", "write_viewer", "scene_data", "FRAME_RATE", "HEADLESS_CHROMIUM"]
 
 VIEWER = "winner.html"
 #: Frames per second of motion stored in the page (the player shows the nearest frame).
 FRAME_RATE = 60.0
 #: At most this many frames, whatever the motion's length.
 MAX_FRAMES = 1200
+#: Flags to open the page in headless Chromium (tests, screenshots): as root, WebGL on SwiftShader,
+#: and none of Chromium's own network traffic.
+HEADLESS_CHROMIUM = (
+    "--no-sandbox",
+    "--disable-gpu",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+)
 #: Colours by module kind (first letter of the module id), for the links of the URDF.
 _COLOURS = {"B": "#6c757d", "J": "#f0a202", "L": "#2f6db5", "E": "#8e44ad", "payload": "#c9a227"}
 

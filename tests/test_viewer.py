@@ -17,23 +17,12 @@ from modular_robots import load_scenario
 from modular_robots.cli import main
 from modular_robots.ocp.trajectory import Trajectory
 from modular_robots.pipeline import run_scenario
-from modular_robots.viewer import VIEWER, scene_data
+from modular_robots.viewer import HEADLESS_CHROMIUM, VIEWER, scene_data
 
 from .conftest import ROOT
 
 SMALL = ROOT / "tests" / "data" / "small.yaml"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-#: As root, headless, with WebGL on SwiftShader and none of Chromium's own network traffic.
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +74,7 @@ def test_the_page_in_headless_chromium(folder, tmp_path):
 
     errors, requests = [], []
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=list(HEADLESS_CHROMIUM))
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 760})
             page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
