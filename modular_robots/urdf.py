@@ -46,6 +46,7 @@ def link_name(index: int, module: Module) -> str:
     return "base_link" if index == 0 else f"m{index}_{module.id}"
 
 
+@cache  # a module's fragments are the same in every composition
 def _inertial(module: Module) -> str:
     if module.mass == 0.0:
         return ""
@@ -55,6 +56,7 @@ def _inertial(module: Module) -> str:
     )
 
 
+@cache
 def _collision(module: Module) -> str:
     if module.collision == "sphere":
         return _fill("sphere", xyz=_vec((0, 0, module.length)), radius=_num(module.radius))
@@ -65,6 +67,7 @@ def _collision(module: Module) -> str:
     return ""
 
 
+@cache
 def _limit(module: Module) -> str:
     if module.limits is None:
         return ""
