@@ -28,6 +28,7 @@ from .folder import ResultsFolder, atomic_write
 from .ocp.candidate import CandidateResult
 from .ocp.tracking import Tracking
 from .ocp.trajectory import Trajectory
+from .ocp.verification import Verification
 from .report import RESULT, WINNER_FILES, write_pruning_plot, write_winner_files
 from .scenario import Scenario
 from .viewer import VIEWER, write_viewer
@@ -253,7 +254,7 @@ def _winner_json(
         "seconds": round(result.seconds, 4),
         "substeps": result.substeps,
         "verification": result.verification.to_json() if result.verification else None,
-        "limits_used": _limits_used(trajectory) if trajectory is not None else None,
+        "limits_used": _limits_used(trajectory, result.verification) if trajectory is not None else None,
         "tracking": tracking.to_json() if tracking is not None else None,
         "closest_approach": approach.to_json() if approach is not None else None,
         "drive": result.drive,
@@ -261,13 +262,16 @@ def _winner_json(
     }
 
 
-def _limits_used(trajectory: Trajectory) -> dict:
-    """Per joint, the largest share of its effort and velocity limit the plan's rows use."""
+def _limits_used(trajectory: Trajectory, verification: Verification | None) -> dict:
+    """Per joint, the largest share of its effort and velocity limit the plan uses: at its rows
+    and, where verification measured it, on its dense grid between them."""
 
-    def share(values, limit):
-        return [float(v) for v in np.max(np.abs(values), axis=0) / np.where(limit > 0, limit, np.inf)]
+    def share(values, limit, dense):
+        rows = np.max(np.abs(values), axis=0) / np.where(limit > 0, limit, np.inf)
+        return [float(v) for v in (np.maximum(rows, dense) if len(dense) == len(rows) else rows)]
 
+    effort, velocity = (verification.effort_share, verification.velocity_share) if verification else ((), ())
     return {
-        "effort": share(trajectory.tau, trajectory.effort_limit),
-        "velocity": share(trajectory.qd, trajectory.velocity_limit),
+        "effort": share(trajectory.tau, trajectory.effort_limit, effort),
+        "velocity": share(trajectory.qd, trajectory.velocity_limit, velocity),
     }

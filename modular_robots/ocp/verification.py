@@ -52,7 +52,9 @@ class Verification:
     ``min_clearance`` [m]: smallest obstacle distance on the grid (inf without obstacles);
     ``position_excess``: largest excursion beyond a position limit, relative to the joint's
     range; ``velocity_ratio``, ``torque_ratio``: largest ``|value| / limit``; ``grid_points``: samples
-    checked; ``substeps``: RK4 sub-steps per interval of the solution.
+    checked; ``substeps``: RK4 sub-steps per interval of the solution; ``velocity_share``,
+    ``effort_share``: per joint, the largest ``|value| / limit`` on the grid (between the plan's
+    rows too, where a torque can exceed its value at the rows).
     """
 
     terminal_error: float
@@ -64,6 +66,8 @@ class Verification:
     torque_ratio: float
     grid_points: int
     substeps: int
+    velocity_share: tuple[float, ...] = ()
+    effort_share: tuple[float, ...] = ()
 
     @property
     def terminal_ok(self) -> bool:
@@ -116,7 +120,8 @@ def verify(
     N, S, nv = problem.intervals, problem.substeps, problem.nv
     hs = tf / (N * S)
     defect, points = 0.0, 0
-    clearance, pos_excess, vel_ratio, tau_ratio = np.inf, 0.0, 0.0, 0.0
+    clearance, pos_excess = np.inf, 0.0
+    vel_share, tau_share = np.zeros(nv), np.zeros(nv)
     vmax, tmax = robot.velocity_limit, robot.effort_limit
     span = np.where(
         np.isfinite(robot.upper - robot.lower) & (robot.upper > robot.lower), robot.upper - robot.lower, 1.0
@@ -138,8 +143,8 @@ def verify(
                 q, v = state[:nv], state[nv:]
                 tau = tr.torque(robot, node, u, s)
                 pos_excess = max(pos_excess, float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span)))
-                vel_ratio = max(vel_ratio, float(np.max(np.abs(v) / vmax)))
-                tau_ratio = max(tau_ratio, float(np.max(np.abs(tau) / tmax)))
+                vel_share = np.maximum(vel_share, np.abs(v) / vmax)
+                tau_share = np.maximum(tau_share, np.abs(tau) / tmax)
                 points += 1
             if problem.collision is not None:
                 clearance = min(clearance, float(problem.collision.closest_many(states[:, :nv])[0].min()))
@@ -157,5 +162,15 @@ def verify(
     x = last.y[:, -1] if last.success else np.full(2 * nv, np.inf)
     error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(problem.q_goal)))
     return Verification(
-        error, float(np.max(np.abs(x[nv:]))), defect, clearance, max(pos_excess, 0.0), vel_ratio, tau_ratio, points, S
+        error,
+        float(np.max(np.abs(x[nv:]))),
+        defect,
+        clearance,
+        max(pos_excess, 0.0),
+        float(vel_share.max()),
+        float(tau_share.max()),
+        points,
+        S,
+        tuple(map(float, vel_share)),
+        tuple(map(float, tau_share)),
     )
