@@ -33,6 +33,13 @@ logger = logging.getLogger(__name__)
 #: non-finite; ``stopped``: closed by the caller.
 STATUSES = ("optimal", "failed", "stopped")
 
+#: Initial barrier parameter (and barrier tolerance) of a cold solve. trust-constr's default, 0.1,
+#: spends about half of a solve's iterations on barrier subproblems far from the optimum; at 1e-3
+#: the paper-5kg candidates need half the iterations (``docs/design-notes.md``).
+COLD_BARRIER = 1e-3
+#: Initial barrier parameter of a warm start (refinement), with a small trust radius.
+WARM_BARRIER = 1e-4
+
 
 @dataclass(frozen=True)
 class Iterate:
@@ -298,7 +305,9 @@ class ShootingSolver:
         if self.warm:
             # Start close to the given point: with the defaults (radius 1, barrier 0.1) a refined
             # re-solve first wandered to 3x its final tf (76 iterations); with these, 19.
-            options.update(initial_tr_radius=0.1, initial_barrier_parameter=1e-4)
+            options.update(initial_tr_radius=0.1, initial_barrier_parameter=WARM_BARRIER)
+        else:
+            options.update(initial_barrier_parameter=COLD_BARRIER, initial_barrier_tolerance=COLD_BARRIER)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # delta_grad == 0 and similar SR1 notes
             return minimize(
