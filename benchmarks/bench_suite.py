@@ -169,13 +169,16 @@ def run_one(path: Path, reuse: bool = False) -> dict:
 
 
 def main(prefix: str = "", reuse: bool = False) -> None:
-    """Run the suite's scenarios whose names start with ``prefix``; ``reuse`` the stored
-    brute-force histories where they exist (``python -m benchmarks.bench_suite s1 reuse``)."""
-    paths = sorted(SUITE.glob(f"{prefix}*.yaml"))
-    results = []
-    for path in paths:  # written after every scenario, so an interrupted suite keeps what it measured
-        results.append(run_one(path, reuse))
-        _write(prefix, results)
+    """Run the suite's scenarios of the seed ``prefix`` (``s1``, ``s2``; default: every seed), each
+    seed's figures to ``suite-<seed>.json``; ``reuse`` the stored brute-force histories where they
+    exist (``python -m benchmarks.bench_suite s1 reuse``)."""
+    seeds = [prefix] if prefix else sorted({path.name.split("-")[0] for path in SUITE.glob("*.yaml")})
+    for seed in seeds:
+        results = []
+        # written after every scenario, so an interrupted suite keeps what it measured
+        for path in sorted(SUITE.glob(f"{seed}-*.yaml")):
+            results.append(run_one(path, reuse))
+            _write(seed, results)
 
 
 def _write(prefix: str, results: list[dict]) -> None:
@@ -193,8 +196,7 @@ def _write(prefix: str, results: list[dict]) -> None:
             "dropped_before_first_iteration": sum(r.get(f"dropped_before_first_iteration_{rule}", 0) for r in rows),
             "pruned_by_bound": sum(r.get(f"pruned_by_bound_{rule}", 0) for r in rows),
         }
-    name = "suite" if not prefix else f"suite-{prefix}"
-    path = write(name, rows, {"summary": summary, "bounds": [b for r in results for b in r["bounds"]]})
+    path = write(f"suite-{prefix}", rows, {"summary": summary, "bounds": [b for r in results for b in r["bounds"]]})
     print(f"-> {path} ({len(rows)} scenarios)", flush=True)
 
 
