@@ -34,7 +34,7 @@ from .collision import CollisionModel
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InputError
 from .execution import Engine, make_engine
-from .ik import DEFAULT_TOLERANCE, distinct, ik_seeds, solve_position_ik
+from .ik import DEFAULT_TOLERANCE, distinct, ik_seeds, solve_position_ik_many
 from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
 
@@ -285,10 +285,9 @@ def _target(robot, collision, target, label, seeds, settings, clock, earlier=Non
     """IK from every seed, then torque and collision on every distinct new solution (the
     ``earlier`` outcome of the same target, if any, is extended)."""
     t0 = time.perf_counter()
-    runs = [
-        solve_position_ik(robot, target, q0, tolerance=settings.tolerance, max_iterations=settings.max_iterations)
-        for q0 in seeds
-    ]
+    runs = solve_position_ik_many(
+        robot, target, seeds, tolerance=settings.tolerance, max_iterations=settings.max_iterations
+    )
     known = earlier.solutions if earlier else []
     solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
     clock.time(INVERSE_KINEMATICS.name, t0)

@@ -17,7 +17,7 @@ import pinocchio as pin
 
 from .robot import RobotModel
 
-__all__ = ["IKResult", "solve_position_ik", "ik_seeds"]
+__all__ = ["IKResult", "solve_position_ik", "solve_position_ik_many", "ik_seeds"]
 
 DEFAULT_TOLERANCE = 1e-4
 """Success threshold on the tool position error [m] (SPEC step B)."""
@@ -72,31 +72,72 @@ def solve_position_ik(
         Stop when the best error has not dropped below ``stall_ratio`` times itself for
         ``stall_iterations`` iterations in a row (a local minimum: usually out of reach).
     """
+    (result,) = solve_position_ik_many(
+        robot,
+        target,
+        np.asarray(q0, dtype=float)[None],
+        tolerance=tolerance,
+        max_iterations=max_iterations,
+        stall_iterations=stall_iterations,
+        stall_ratio=stall_ratio,
+    )
+    return result
+
+
+def solve_position_ik_many(
+    robot: RobotModel,
+    target: np.ndarray,
+    seeds: np.ndarray,
+    *,
+    tolerance: float = DEFAULT_TOLERANCE,
+    max_iterations: int = 100,
+    stall_iterations: int = 6,
+    stall_ratio: float = 0.995,
+) -> list[IKResult]:
+    """:func:`solve_position_ik` from every row of ``seeds`` ``(S, nq)``, one result per row.
+
+    The runs advance in lockstep, each with exactly its own arithmetic, so every result is bit
+    for bit the one a run of its own gives. The joint-limit bookkeeping of all runs (which joints
+    block, the clipping into the limits) then costs one numpy call per iteration instead of one
+    per run: on arrays of a few elements numpy's call overhead, not the arithmetic, is what an
+    iteration costs. The Jacobian products stay one per run, as BLAS may round a batched product
+    differently.
+    """
     model, data, frame = robot.model, robot.data, robot.tool_frame_id
     lower, upper = model.lowerPositionLimit, model.upperPositionLimit
     target = np.asarray(target, dtype=float)
-    q = np.clip(np.asarray(q0, dtype=float), lower, upper)
-    best_q, best_error, since_best = q, math.inf, 0
-    for iteration in range(1, max_iterations + 1):  # noqa: B007 - read after the loop
-        jacobian = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-        error_vector = target - data.oMf[frame].translation
-        error = math.sqrt(error_vector @ error_vector)
-        if error < best_error * stall_ratio:
-            since_best = 0
-        else:
-            since_best += 1
-        if error < best_error:
-            best_q, best_error = q, error
-        if error <= tolerance or since_best >= stall_iterations:
+    q = np.clip(np.asarray(seeds, dtype=float).reshape(-1, model.nq), lower, upper)
+    count = len(q)
+    best_q, best_error = list(q), [math.inf] * count
+    since_best, iterations = [0] * count, [max_iterations] * count
+    running = list(range(count))  # the run of each row of q
+    for iteration in range(1, max_iterations + 1):
+        rows, steps, systems = [], [], []
+        for row, run in enumerate(running):
+            jacobian = pin.computeFrameJacobian(model, data, q[row], frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+            error_vector = target - data.oMf[frame].translation
+            error = math.sqrt(error_vector @ error_vector)
+            since_best[run] = 0 if error < best_error[run] * stall_ratio else since_best[run] + 1
+            if error < best_error[run]:
+                best_q[run], best_error[run] = q[row], error
+            if error <= tolerance or since_best[run] >= stall_iterations:
+                iterations[run] = iteration
+                continue
+            rows.append(row)
+            steps.append(_lm_step(jacobian, error_vector, error))
+            systems.append((jacobian, error_vector, error))
+        if not rows:
             break
-        step = _lm_step(jacobian, error_vector, error)
+        q, step = q[rows], np.array(steps)
         blocked = ((q <= lower) & (step < 0.0)) | ((q >= upper) & (step > 0.0))
-        if blocked.any():
-            step = np.zeros_like(step)
-            free = ~blocked
-            step[free] = _lm_step(jacobian[:, free], error_vector, error)
+        for row in np.flatnonzero(blocked.any(axis=1)).tolist():
+            jacobian, error_vector, error = systems[row]
+            free = ~blocked[row]
+            step[row] = 0.0
+            step[row, free] = _lm_step(jacobian[:, free], error_vector, error)
         q = np.minimum(np.maximum(q + step, lower), upper)
-    return IKResult(best_q, best_error, iteration)
+        running = [running[row] for row in rows]
+    return [IKResult(best_q[run].copy(), best_error[run], iterations[run]) for run in range(count)]
 
 
 def _lm_step(jacobian: np.ndarray, error_vector: np.ndarray, error: float) -> np.ndarray:

@@ -20,7 +20,7 @@ from modular_robots import (
 from modular_robots.cli import main
 from modular_robots.execution import ProcessEngine, SerialEngine
 from modular_robots.feasibility import TESTS, FeasibilitySummary, check_composition, filter_compositions, max_reach
-from modular_robots.ik import _lm_step, ik_seeds, solve_position_ik
+from modular_robots.ik import _lm_step, ik_seeds, solve_position_ik, solve_position_ik_many
 
 from .conftest import PAPER_5KG, PAPER_CATALOG
 
@@ -101,6 +101,24 @@ def test_ik_converges_from_every_seed_on_a_reachable_target(paper_catalog):
     for r in results:
         if r.success():
             assert np.linalg.norm(robot.tool_position(r.q) - target) == pytest.approx(r.error, abs=1e-12)
+
+
+def test_ik_runs_in_lockstep_give_the_runs_of_their_own(paper_catalog):
+    """Seeds that stop early, stall, or push joints against their limits: each run of
+    solve_position_ik_many is bit for bit the run solve_position_ik makes from its seed alone."""
+    scenario = load_scenario(PAPER_5KG)
+    for name in ("B-J1-L3-J1-L1-J1-L3-E1", "B-J1-L3-J1-L3-J2-L2-J1-L1-E1", "B-J2-L2-E2"):
+        robot = robot_model(Composition.from_name(name, paper_catalog), paper_catalog, 0.0)
+        seeds = ik_seeds(robot, 16)
+        for target in (scenario.task.start, scenario.task.goal, (0.0, 0.0, 1.1)):
+            together = solve_position_ik_many(robot, target, seeds)
+            for q0, run in zip(seeds, together):
+                alone = solve_position_ik(robot, target, q0)
+                assert (run.q.tobytes(), run.error, run.iterations) == (
+                    alone.q.tobytes(),
+                    alone.error,
+                    alone.iterations,
+                )
 
 
 def test_lm_step_matches_the_plain_normal_equations():
