@@ -96,12 +96,14 @@ def solve_position_ik_many(
 ) -> list[IKResult]:
     """:func:`solve_position_ik` from every row of ``seeds`` ``(S, nq)``, one result per row.
 
-    The runs advance in lockstep, each with exactly its own arithmetic, so every result is bit
-    for bit the one a run of its own gives. The joint-limit bookkeeping of all runs (which joints
-    block, the clipping into the limits) then costs one numpy call per iteration instead of one
-    per run: on arrays of a few elements numpy's call overhead, not the arithmetic, is what an
-    iteration costs. The Jacobian products stay one per run, as BLAS may round a batched product
-    differently.
+    The runs advance in lockstep and each keeps exactly its own arithmetic, so every result is
+    bit for bit the one a run of its own gives. On arrays of a few elements numpy's call
+    overhead, not the arithmetic, is what an iteration costs, so every numpy operation acts on
+    all runs at once: the elementwise ones (errors, blocked joints, clipping) trivially, and the
+    products (``e . e``, ``J J^T``, ``J^T x``) as stacked matmuls, which numpy performs as one
+    BLAS call per run with the same routine and strides as the run's own product (BLAS kernels
+    may fuse multiply-adds, so no elementwise formula would round the same). Only Pinocchio's
+    Jacobian and a run whose step a joint limit blocks need a call of their own.
     """
     model, data, frame = robot.model, robot.data, robot.tool_frame_id
     lower, upper = model.lowerPositionLimit, model.upperPositionLimit
@@ -112,56 +114,110 @@ def solve_position_ik_many(
     since_best, iterations = [0] * count, [max_iterations] * count
     running = list(range(count))  # the run of each row of q
     for iteration in range(1, max_iterations + 1):
-        rows, steps, systems = [], [], []
-        for row, run in enumerate(running):
-            jacobian = pin.computeFrameJacobian(model, data, q[row], frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-            error_vector = target - data.oMf[frame].translation
-            error = math.sqrt(error_vector @ error_vector)
+        jacobians, positions = _frame_jacobians(model, data, frame, q)
+        error_vectors = target - positions
+        errors = np.sqrt(np.vecdot(error_vectors, error_vectors)).tolist()
+        rows = []
+        for row, (run, error) in enumerate(zip(running, errors)):
             since_best[run] = 0 if error < best_error[run] * stall_ratio else since_best[run] + 1
             if error < best_error[run]:
                 best_q[run], best_error[run] = q[row], error
             if error <= tolerance or since_best[run] >= stall_iterations:
                 iterations[run] = iteration
-                continue
-            rows.append(row)
-            steps.append(_lm_step(jacobian, error_vector, error))
-            systems.append((jacobian, error_vector, error))
+            else:
+                rows.append(row)
         if not rows:
             break
-        q, step = q[rows], np.array(steps)
-        blocked = ((q <= lower) & (step < 0.0)) | ((q >= upper) & (step > 0.0))
-        for row in np.flatnonzero(blocked.any(axis=1)).tolist():
-            jacobian, error_vector, error = systems[row]
-            free = ~blocked[row]
-            step[row] = 0.0
-            step[row, free] = _lm_step(jacobian[:, free], error_vector, error)
-        q = np.minimum(np.maximum(q + step, lower), upper)
-        running = [running[row] for row in rows]
+        if len(rows) < len(q):
+            q, jacobians, error_vectors = q[rows], jacobians[rows], error_vectors[rows]
+            errors, running = [errors[row] for row in rows], [running[row] for row in rows]
+        q = _lm_iteration(q, lower, upper, jacobians[:, :3], error_vectors.tolist(), errors)
     return [IKResult(best_q[run].copy(), best_error[run], iterations[run]) for run in range(count)]
 
 
-def _lm_step(jacobian: np.ndarray, error_vector: np.ndarray, error: float) -> np.ndarray:
+def _frame_jacobians(model: pin.Model, data: pin.Data, frame: int, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pinocchio's Jacobian of ``frame`` ``(K, 6, nv)`` (base-frame axes) and its position
+    ``(K, 3)`` at every row of ``q`` ``(K, nq)``."""
+    jacobians, positions = np.empty((len(q), 6, model.nv)), np.empty((len(q), 3))
+    placements = data.oMf
+    for row, q_row in enumerate(q):
+        jacobians[row] = pin.computeFrameJacobian(model, data, q_row, frame, pin.LOCAL_WORLD_ALIGNED)
+        positions[row] = placements[frame].translation
+    return jacobians, positions
+
+
+def _lm_iteration(
+    q: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    jacobians: np.ndarray,
+    error_vectors: list[list[float]],
+    errors: list[float],
+) -> np.ndarray:
+    """The next configuration of every run ``(K, nq)``: the Levenberg-Marquardt step of its
+    position Jacobian ``(K, 3, nv)``, except that joints at a limit which the step would push
+    further out stay (the others take the step of the Jacobian without them), clipped into the
+    limits."""
+    step = _lm_steps(jacobians, error_vectors, errors)
+    blocked = ((q <= lower) & (step < 0.0)) | ((q >= upper) & (step > 0.0))
+    stuck = np.flatnonzero(blocked.any(axis=1)).tolist()
+    if stuck:
+        free = ~blocked
+        step[stuck] = 0.0
+        for row in stuck:
+            step[row, free[row]] = _lm_step(jacobians[row][:, free[row]], error_vectors[row], errors[row])
+    return np.minimum(np.maximum(q + step, lower), upper)
+
+
+def _lm_steps(jacobians: np.ndarray, error_vectors: list[list[float]], errors: list[float]) -> np.ndarray:
+    """:func:`_lm_step` of every run: Jacobians ``(K, 3, nv)``, error vectors and errors;
+    steps ``(K, nv)``."""
+    solutions = [
+        _dual_solve(products, error_vector, error)
+        for products, error_vector, error in zip((jacobians @ jacobians.mT).tolist(), error_vectors, errors)
+    ]
+    degenerate = [row for row, solution in enumerate(solutions) if solution is None]
+    for row in degenerate:
+        solutions[row] = (0.0, 0.0, 0.0)
+    steps = (jacobians.mT @ np.array(solutions)[:, :, None])[:, :, 0]
+    steps[degenerate] = 0.0
+    return steps
+
+
+def _lm_step(jacobian: np.ndarray, error_vector: list[float], error: float) -> np.ndarray:
     """Levenberg-Marquardt step ``(J^T J + w I)^-1 J^T e`` with ``w = |e|^2 / 2 + 1e-4``
-    (Sugihara 2011), in its 3 x 3 dual form ``J^T (J J^T + w I)^-1 e``.
+    (Sugihara 2011), in its 3 x 3 dual form ``J^T (J J^T + w I)^-1 e``."""
+    solution = _dual_solve((jacobian @ jacobian.T).tolist(), error_vector, error)
+    if solution is None:
+        return np.zeros(jacobian.shape[1])
+    return jacobian.T @ np.array(solution)
+
+
+def _dual_solve(
+    products: list[list[float]], error_vector: list[float], error: float
+) -> tuple[float, float, float] | None:
+    """``(J J^T + w I)^-1 e`` from ``J J^T`` (its upper triangle is read), ``e`` and ``|e|``;
+    None for a system that is not positive definite, which only absurd geometry (metres beyond
+    1e8) gives: no step rather than a crash.
 
     The symmetric positive definite 3 x 3 system is solved by Cramer's rule on scalars: this
-    loop runs millions of times in step B and numpy's general solver costs more than the
-    arithmetic (``tests/test_feasibility.py`` checks it against the plain normal equations).
+    runs millions of times in step B and numpy's general solver costs more than the arithmetic
+    (``tests/test_feasibility.py`` checks it against the plain normal equations).
     """
     damping = 0.5 * error * error + 1e-4
-    (a, b, c), (_, d, e), (_, _, f) = (jacobian @ jacobian.T).tolist()
+    (a, b, c), (_, d, e), (_, _, f) = products
     a += damping
     d += damping
     f += damping
-    x, y, z = error_vector.tolist()
+    x, y, z = error_vector
     co_a, co_b, co_c = d * f - e * e, c * e - b * f, b * e - c * d
     det = a * co_a + b * co_b + c * co_c
-    if not det > 0.0:  # only for absurd geometry (metres beyond 1e8): no step rather than a crash
-        return np.zeros(jacobian.shape[1])
+    if not det > 0.0:
+        return None
     u = (co_a * x + co_b * y + co_c * z) / det
     v = (co_b * x + (a * f - c * c) * y + (b * c - a * e) * z) / det
     w = (co_c * x + (b * c - a * e) * y + (a * d - b * b) * z) / det
-    return jacobian.T @ np.array((u, v, w))
+    return u, v, w
 
 
 def distinct(solutions: Iterator[np.ndarray], atol: float = 1e-3) -> list[np.ndarray]:
