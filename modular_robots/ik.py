@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
@@ -38,10 +39,15 @@ class IKResult:
 def ik_seeds(robot: RobotModel, count: int, seed: int = 0) -> np.ndarray:
     """``count`` deterministic start configurations: the middle of the limits, then uniform
     draws within them (``numpy`` generator seeded with ``seed``)."""
-    lower, upper = robot.lower, robot.upper
+    return _seeds(tuple(robot.lower.tolist()), tuple(robot.upper.tolist()), count, seed).copy()
+
+
+@lru_cache(maxsize=1024)  # compositions with the same joints in the same order share their seeds
+def _seeds(lower: tuple[float, ...], upper: tuple[float, ...], count: int, seed: int) -> np.ndarray:
+    lower_limits, upper_limits = np.array(lower), np.array(upper)
     rng = np.random.default_rng(seed)
-    draws = rng.uniform(lower, upper, size=(max(count - 1, 0), robot.nq))
-    return np.vstack([(lower + upper) / 2.0, draws])[:count]
+    draws = rng.uniform(lower_limits, upper_limits, size=(max(count - 1, 0), len(lower)))
+    return np.vstack([(lower_limits + upper_limits) / 2.0, draws])[:count]
 
 
 def solve_position_ik(
