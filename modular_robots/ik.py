@@ -8,6 +8,7 @@ is what makes unreachable targets cheap.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -108,8 +109,9 @@ def solve_position_ik_many(
     all runs at once: the elementwise ones (errors, blocked joints, clipping) trivially, and the
     products (``e . e``, ``J J^T``, ``J^T x``) as stacked matmuls, which numpy performs as one
     BLAS call per run with the same routine and strides as the run's own product (BLAS kernels
-    may fuse multiply-adds, so no elementwise formula would round the same). Only Pinocchio's
-    Jacobian and a run whose step a joint limit blocks need a call of their own.
+    may fuse multiply-adds, so no elementwise formula would round the same). Runs whose step a
+    joint limit blocks are solved again stacked by their number of free joints; only Pinocchio's
+    Jacobian needs a call per run.
     """
     model, data, frame = robot.model, robot.data, robot.tool_frame_id
     lower, upper = model.lowerPositionLimit, model.upperPositionLimit
@@ -168,16 +170,49 @@ def _lm_iteration(
     blocked = ((q <= lower) & (step < 0.0)) | ((q >= upper) & (step > 0.0))
     stuck = np.flatnonzero(blocked.any(axis=1)).tolist()
     if stuck:
-        free = ~blocked
         step[stuck] = 0.0
-        for row in stuck:
-            step[row, free[row]] = _lm_step(jacobians[row][:, free[row]], error_vectors[row], errors[row])
+        _free_steps(step, stuck, ~blocked[stuck], jacobians, error_vectors, errors)
     return np.minimum(np.maximum(q + step, lower), upper)
 
 
+def _free_steps(
+    step: np.ndarray,
+    rows: list[int],
+    free: np.ndarray,
+    jacobians: np.ndarray,
+    error_vectors: list[list[float]],
+    errors: list[float],
+) -> None:
+    """Write into ``step`` the Levenberg-Marquardt step of the Jacobian ``J[:, free]`` of the
+    runs ``rows`` (``free``: their free joints, one row each).
+
+    Runs with as many free joints are solved together. numpy lays ``J[:, free]`` out as the
+    transpose of a C-ordered ``(free joints, 3)`` block, so all runs' blocks are gathered in one
+    array, sorted by size, and each size's slice, reshaped, is a stack with that very layout:
+    the stacked products are the BLAS calls of each run's own ``J[:, free]``.
+    """
+    sizes = free.sum(axis=1).tolist()
+    order = sorted(range(len(rows)), key=sizes.__getitem__)
+    runs, joints = np.nonzero(free[order])
+    runs = np.array([rows[i] for i in order])[runs]
+    blocks = jacobians.mT[runs, joints]
+    steps, start = [], 0
+    for size, group in itertools.groupby(order, key=sizes.__getitem__):
+        members = [rows[i] for i in group]
+        end = start + size * len(members)
+        if size:
+            stacked = blocks[start:end].reshape(len(members), size, 3).mT
+            found = _lm_steps(stacked, [error_vectors[i] for i in members], [errors[i] for i in members])
+            steps.append(found.ravel())
+        start = end
+    if steps:
+        step[runs, joints] = np.concatenate(steps)
+
+
 def _lm_steps(jacobians: np.ndarray, error_vectors: list[list[float]], errors: list[float]) -> np.ndarray:
-    """:func:`_lm_step` of every run: Jacobians ``(K, 3, nv)``, error vectors and errors;
-    steps ``(K, nv)``."""
+    """Levenberg-Marquardt steps ``(J^T J + w I)^-1 J^T e`` with ``w = |e|^2 / 2 + 1e-4``
+    (Sugihara 2011), in their 3 x 3 dual form ``J^T (J J^T + w I)^-1 e``, of every run: Jacobians
+    ``(K, 3, nv)``, error vectors ``e`` and errors ``|e|``; steps ``(K, nv)``."""
     solutions = [
         _dual_solve(products, error_vector, error)
         for products, error_vector, error in zip((jacobians @ jacobians.mT).tolist(), error_vectors, errors)
@@ -186,17 +221,9 @@ def _lm_steps(jacobians: np.ndarray, error_vectors: list[list[float]], errors: l
     for row in degenerate:
         solutions[row] = (0.0, 0.0, 0.0)
     steps = (jacobians.mT @ np.array(solutions)[:, :, None])[:, :, 0]
-    steps[degenerate] = 0.0
+    if degenerate:
+        steps[degenerate] = 0.0
     return steps
-
-
-def _lm_step(jacobian: np.ndarray, error_vector: list[float], error: float) -> np.ndarray:
-    """Levenberg-Marquardt step ``(J^T J + w I)^-1 J^T e`` with ``w = |e|^2 / 2 + 1e-4``
-    (Sugihara 2011), in its 3 x 3 dual form ``J^T (J J^T + w I)^-1 e``."""
-    solution = _dual_solve((jacobian @ jacobian.T).tolist(), error_vector, error)
-    if solution is None:
-        return np.zeros(jacobian.shape[1])
-    return jacobian.T @ np.array(solution)
 
 
 def _dual_solve(

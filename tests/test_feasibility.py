@@ -20,7 +20,7 @@ from modular_robots import (
 from modular_robots.cli import main
 from modular_robots.execution import ProcessEngine, SerialEngine
 from modular_robots.feasibility import TESTS, FeasibilitySummary, check_composition, filter_compositions, max_reach
-from modular_robots.ik import _lm_step, ik_seeds, solve_position_ik, solve_position_ik_many
+from modular_robots.ik import _lm_steps, ik_seeds, solve_position_ik, solve_position_ik_many
 
 from .conftest import PAPER_5KG, PAPER_CATALOG
 
@@ -128,7 +128,9 @@ def test_lm_step_matches_the_plain_normal_equations():
         norm = float(np.linalg.norm(error))
         damping = 0.5 * norm * norm + 1e-4
         reference = np.linalg.solve(jacobian.T @ jacobian + damping * np.eye(n), jacobian.T @ error)
-        np.testing.assert_allclose(_lm_step(jacobian, error.tolist(), norm), reference, rtol=1e-10, atol=1e-13)
+        np.testing.assert_allclose(
+            _lm_steps(jacobian[None], [error.tolist()], [norm])[0], reference, rtol=1e-10, atol=1e-13
+        )
 
 
 # -- collision -----------------------------------------------------------------------------------
