@@ -149,23 +149,39 @@ def _rx(angle: float) -> np.ndarray:
 
 def max_reach(composition: Composition, catalog: Catalog) -> float:
     """Upper bound on the tool's distance from the base origin [m], from catalogue numbers."""
-    total = 0.0
-    rotation, offset, strokes = np.eye(3), np.zeros(3), []
+    total, _, offset, strokes = _reach_along(catalog, composition.modules)
+    return total + _piece_reach(offset, strokes)
 
-    def piece() -> float:
-        corners = itertools.product(*[(lo * axis, hi * axis) for axis, lo, hi in strokes])
-        return max(float(np.linalg.norm(offset + sum(c, np.zeros(3)))) for c in corners)
 
-    for module in (catalog.module(m) for m in composition.modules):
-        rotation = rotation @ _rx(module.twist_in)
-        if module.joint == "revolute":
-            total += piece()
-            rotation, offset, strokes = np.eye(3), np.zeros(3), []
-        elif module.joint == "prismatic":
-            strokes.append((rotation[:, 2].copy(), module.limits.lower, module.limits.upper))
-        offset = offset + module.length * rotation[:, 2]
-        rotation = rotation @ _rx(module.twist_out)
-    return total + piece()
+_Stroke = tuple[np.ndarray, float, float]
+
+
+@functools.lru_cache(maxsize=16384)  # compositions share their chains but for the last modules
+def _reach_along(
+    catalog: Catalog, modules: tuple[str, ...]
+) -> tuple[float, np.ndarray, np.ndarray, tuple[_Stroke, ...]]:
+    """After the chain ``modules``: the bound on the distance covered by its rigid pieces that end
+    at a revolute axis, and the open piece's rotation, offset and prismatic strokes (axis, lower,
+    upper) since the last revolute axis."""
+    if not modules:
+        return 0.0, np.eye(3), np.zeros(3), ()
+    total, rotation, offset, strokes = _reach_along(catalog, modules[:-1])
+    module = catalog.module(modules[-1])
+    rotation = rotation @ _rx(module.twist_in)
+    if module.joint == "revolute":
+        total += _piece_reach(offset, strokes)
+        rotation, offset, strokes = np.eye(3), np.zeros(3), ()
+    elif module.joint == "prismatic":
+        strokes = (*strokes, (rotation[:, 2].copy(), module.limits.lower, module.limits.upper))
+    offset = offset + module.length * rotation[:, 2]
+    return total, rotation @ _rx(module.twist_out), offset, strokes
+
+
+def _piece_reach(offset: np.ndarray, strokes: tuple[_Stroke, ...]) -> float:
+    """The largest length of a rigid piece with ``offset`` and prismatic ``strokes``: at a corner
+    of the strokes."""
+    corners = itertools.product(*[(lo * axis, hi * axis) for axis, lo, hi in strokes])
+    return max(float(np.linalg.norm(offset + sum(c, np.zeros(3)))) for c in corners)
 
 
 # -- tests 2 and 3: per configuration ---------------------------------------------------------
