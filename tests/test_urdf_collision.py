@@ -214,6 +214,26 @@ def test_signed_distance_runs_straight_through_contact(paper_catalog):
         assert d == pytest.approx(gap, abs=1e-9), gap
 
 
+def test_path_clear_answers_as_the_closest_distances_do(paper_catalog):
+    """path_clear decides most samples from axis bounds; on random segments, some through the
+    obstacles, and at clearances exactly at the closest sampled distances, its answer is that of
+    the smallest distance closest_many measures."""
+    robot = robot_model(Composition.from_name("B-J1-L1-J2-L3-J1-L2-E1", paper_catalog), paper_catalog, 5.0)
+    obstacles = [SphereObstacle((0.9, -0.6, 0.9), 0.25), SphereObstacle((-0.5, 0.8, 0.4), 0.3)]
+    model = CollisionModel(robot, obstacles)
+    rng = np.random.default_rng(11)
+    s = np.linspace(0.0, 1.0, 25)[:, None]
+    answers = set()
+    for _ in range(60):
+        a, b = rng.uniform(robot.lower, robot.upper, (2, robot.nv))
+        closest = model.closest_many(a + s * (b - a))[0].min()
+        for clearance in (0.02, closest, np.nextafter(closest, np.inf), closest + 1e-9, closest - 1e-9):
+            answer = model.path_clear(np.array([a, b]), clearance=clearance)
+            assert answer == (closest >= clearance)
+            answers.add(answer)
+    assert answers == {True, False}
+
+
 def test_closest_many_equals_every_pair_measured_and_its_gradient(paper_catalog):
     """The batched query (bounds discard primitives, world-frame joint Jacobian for the gradient)
     against the plain one that measures every (primitive, obstacle) pair with FCL, and its
