@@ -254,9 +254,13 @@ def _dual_solve(
 
 
 def distinct(solutions: Iterator[np.ndarray], atol: float = 1e-3) -> list[np.ndarray]:
-    """Drop configurations within ``atol`` (max norm) of an earlier one."""
+    """Drop configurations within ``atol`` (max norm) of an earlier one (configurations are
+    finite; compared as Python floats, which costs less than numpy on a few joints)."""
     kept: list[np.ndarray] = []
+    kept_values: list[list[float]] = []
     for q in solutions:
-        if all(np.max(np.abs(q - k)) > atol for k in kept):
+        values = q.tolist()
+        if all(any(abs(a - b) > atol for a, b in zip(values, other)) for other in kept_values):
             kept.append(q)
+            kept_values.append(values)
     return kept
