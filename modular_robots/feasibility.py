@@ -24,7 +24,7 @@ import functools
 import itertools
 import math
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +34,7 @@ from .collision import CollisionModel
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InputError
 from .execution import Engine, make_engine
-from .ik import DEFAULT_TOLERANCE, distinct, ik_seeds, solve_position_ik_many
+from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch, solve_position_ik_many
 from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
 
@@ -46,6 +46,7 @@ __all__ = [
     "TESTS",
     "max_reach",
     "check_composition",
+    "check_compositions",
     "filter_compositions",
     "composition_space",
     "estimate_seconds",
@@ -228,41 +229,111 @@ def check_composition(
     composition: Composition, catalog: Catalog, task: Task, settings: FeasibilitySettings = FeasibilitySettings()
 ) -> Verdict:
     """Run the cascade on one composition; never raises for an infeasible one."""
-    clock = _Clock()
-    figures: dict[str, float] = {}
+    return check_compositions([composition], catalog, task, settings)[0]
+
+
+def check_compositions(
+    compositions: Sequence[Composition],
+    catalog: Catalog,
+    task: Task,
+    settings: FeasibilitySettings = FeasibilitySettings(),
+) -> list[Verdict]:
+    """:func:`check_composition` of each composition, with the IK at the start of all that pass
+    the reach test run together (:func:`~modular_robots.ik.solve_position_ik_batch`).
+
+    That IK is most of step B's work, and each of its iterations costs less per seed the more
+    seeds share it, while every result stays the one a composition's own IK gives: the verdicts
+    are those of :func:`check_composition`, bit for bit. The shared IK's seconds are split among
+    the compositions in proportion to their IK iterations.
+    """
     targets = {"start": np.asarray(task.start, dtype=float), "goal": np.asarray(task.goal, dtype=float)}
-
-    def fail(test: str, message: str) -> Verdict:
-        return Verdict(composition, test, message, figures, clock.seconds)
-
+    cascades = [_Cascade(composition) for composition in compositions]
+    verdicts: dict[int, Verdict] = {}
+    for i, cascade in enumerate(cascades):
+        if (verdict := _reach_and_model(cascade, catalog, task, settings, targets)) is not None:
+            verdicts[i] = verdict
+    ready = [i for i in range(len(cascades)) if i not in verdicts]
+    first = next(iter(targets.values()))
     t0 = time.perf_counter()
-    reach = max_reach(composition, catalog)
+    first_runs = solve_position_ik_batch(
+        [(cascades[i].robot, first, cascades[i].seeds) for i in ready],
+        tolerance=settings.tolerance,
+        max_iterations=settings.max_iterations,
+    )
+    _share(time.perf_counter() - t0, [cascades[i].clock for i in ready], first_runs)
+    for i, runs in zip(ready, first_runs):
+        verdicts[i] = _targets(cascades[i], task, settings, targets, runs)
+    return [verdicts[i] for i in range(len(cascades))]
+
+
+@dataclass
+class _Cascade:
+    """One composition on its way through the cascade: its clock, the figures so far and, once
+    it passes the reach test, its robot model, collision model (built on first use: most
+    compositions fail IK or torque before a collision is measured) and IK seeds."""
+
+    composition: Composition
+    clock: _Clock = field(default_factory=_Clock)
+    figures: dict[str, float] = field(default_factory=dict)
+    robot: RobotModel | None = None
+    collision: Callable[[], CollisionModel] | None = None
+    seeds: np.ndarray | None = None
+
+    def fail(self, test: str, message: str) -> Verdict:
+        return Verdict(self.composition, test, message, self.figures, self.clock.seconds)
+
+
+def _reach_and_model(
+    cascade: _Cascade, catalog: Catalog, task: Task, settings: FeasibilitySettings, targets: dict[str, np.ndarray]
+) -> Verdict | None:
+    """The reach test; if it passes, the models and seeds of ``cascade`` are built (and None returned)."""
+    t0 = time.perf_counter()
+    reach = max_reach(cascade.composition, catalog)
     far_label, far = max(targets.items(), key=lambda item: float(np.linalg.norm(item[1])))
-    figures["reach_margin"] = reach - float(np.linalg.norm(far))
-    clock.time(REACH.name, t0)
-    if figures["reach_margin"] < 0.0:
-        return fail(
+    cascade.figures["reach_margin"] = reach - float(np.linalg.norm(far))
+    cascade.clock.time(REACH.name, t0)
+    if cascade.figures["reach_margin"] < 0.0:
+        return cascade.fail(
             REACH.name,
             f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
             f"the arm reaches at most {reach:.3f} m",
         )
-
     t0 = time.perf_counter()
-    robot = robot_model(composition, catalog, task.payload)
-    # built on first use: most compositions fail IK or torque before a collision is measured
-    collision = functools.cache(lambda: CollisionModel(robot, task.obstacles))
-    seeds = ik_seeds(robot, settings.seeds)
-    clock.time("model", t0)
+    robot = cascade.robot = robot_model(cascade.composition, catalog, task.payload)
+    cascade.collision = functools.cache(lambda: CollisionModel(robot, task.obstacles))
+    cascade.seeds = ik_seeds(robot, settings.seeds)
+    cascade.clock.time("model", t0)
+    return None
 
+
+def _share(seconds: float, clocks: list[_Clock], runs: list[list[IKResult]]) -> None:
+    """Split the ``seconds`` of a shared IK among ``clocks`` in proportion to their ``runs``' iterations."""
+    work = [sum(run.iterations for run in found) for found in runs]
+    total = max(sum(work), 1)
+    for clock, iterations in zip(clocks, work):
+        clock.seconds[INVERSE_KINEMATICS.name] += seconds * iterations / total
+
+
+def _targets(
+    cascade: _Cascade,
+    task: Task,
+    settings: FeasibilitySettings,
+    targets: dict[str, np.ndarray],
+    first_runs: list[IKResult],
+) -> Verdict:
+    """The IK, torque and collision tests at each target (the IK runs from the first seeds at
+    the first target are given), then the boundary configurations."""
+    robot, collision, figures, clock = cascade.robot, cascade.collision, cascade.figures, cascade.clock
     passing: dict[str, list[np.ndarray]] = {}
     for label, target in targets.items():
-        outcome = _target(robot, collision, target, label, seeds, settings, clock)
+        runs = first_runs if not passing else None
+        outcome = _target(robot, collision, target, label, cascade.seeds, settings, clock, runs=runs)
         if outcome.solutions and not outcome.kept and settings.escalation > 1:
             more = ik_seeds(robot, settings.seeds * settings.escalation)[settings.seeds :]
             outcome = _target(robot, collision, target, label, more, settings, clock, outcome)
         figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
         if not outcome.solutions:
-            return fail(
+            return cascade.fail(
                 INVERSE_KINEMATICS.name,
                 f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m)",
             )
@@ -270,13 +341,13 @@ def check_composition(
         figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
         if not outcome.kept:
             tests_passed, _, message = outcome.closest
-            return fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
+            return cascade.fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
         passing[label] = outcome.kept
     (q_start, q_goal), clear = _boundary_pair(robot, collision(), passing["start"], passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
     figures["clearance"] = min(collision().min_distance(q) for q in (q_start, q_goal))
     return Verdict(
-        composition,
+        cascade.composition,
         None,
         "feasible",
         figures,
@@ -297,13 +368,14 @@ class _TargetOutcome:
     closest: tuple[int, float, str] | None  # (tests passed, figure, message) of the best reject
 
 
-def _target(robot, collision, target, label, seeds, settings, clock, earlier=None) -> _TargetOutcome:
-    """IK from every seed, then torque and collision on every distinct new solution (the
-    ``earlier`` outcome of the same target, if any, is extended)."""
+def _target(robot, collision, target, label, seeds, settings, clock, earlier=None, runs=None) -> _TargetOutcome:
+    """IK from every seed (unless its ``runs`` are given), then torque and collision on every
+    distinct new solution (the ``earlier`` outcome of the same target, if any, is extended)."""
     t0 = time.perf_counter()
-    runs = solve_position_ik_many(
-        robot, target, seeds, tolerance=settings.tolerance, max_iterations=settings.max_iterations
-    )
+    if runs is None:
+        runs = solve_position_ik_many(
+            robot, target, seeds, tolerance=settings.tolerance, max_iterations=settings.max_iterations
+        )
     known = earlier.solutions if earlier else []
     solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
     clock.time(INVERSE_KINEMATICS.name, t0)
@@ -351,7 +423,7 @@ def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals):
 # -- many compositions -------------------------------------------------------------------------
 def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
     catalog, task, settings = context
-    return [check_composition(c, catalog, task, settings) for c in chunk]
+    return check_compositions(chunk, catalog, task, settings)
 
 
 #: CPU seconds of step B per composition on the paper's catalogue (``benchmarks/bench_feasibility.py``
