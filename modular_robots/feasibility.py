@@ -34,7 +34,7 @@ from .collision import CollisionModel
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InputError
 from .execution import Engine, make_engine
-from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch, solve_position_ik_many
+from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
 from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
 
@@ -238,72 +238,103 @@ def check_compositions(
     task: Task,
     settings: FeasibilitySettings = FeasibilitySettings(),
 ) -> list[Verdict]:
-    """:func:`check_composition` of each composition, with the IK at the start of all that pass
-    the reach test run together (:func:`~modular_robots.ik.solve_position_ik_batch`).
+    """:func:`check_composition` of each composition, a test at a time for all of them: the IK
+    runs at a target of every composition still in the cascade run together
+    (:func:`~modular_robots.ik.solve_position_ik_batch`).
 
-    That IK is most of step B's work, and each of its iterations costs less per seed the more
-    seeds share it, while every result stays the one a composition's own IK gives: the verdicts
-    are those of :func:`check_composition`, bit for bit. The shared IK's seconds are split among
-    the compositions in proportion to their IK iterations.
+    IK is most of step B's work, and an IK iteration costs less per seed the more seeds share it
+    (about half as much with 64 seeds as with 8), while every result stays the one a
+    composition's own IK gives: the verdicts are those of :func:`check_composition`, bit for bit.
+    A shared IK's seconds are split among the compositions in proportion to their IK iterations.
     """
     targets = {"start": np.asarray(task.start, dtype=float), "goal": np.asarray(task.goal, dtype=float)}
     cascades = [_Cascade(composition) for composition in compositions]
-    verdicts: dict[int, Verdict] = {}
-    for i, cascade in enumerate(cascades):
-        if (verdict := _reach_and_model(cascade, catalog, task, settings, targets)) is not None:
-            verdicts[i] = verdict
-    ready = [i for i in range(len(cascades)) if i not in verdicts]
-    first = next(iter(targets.values()))
-    t0 = time.perf_counter()
-    first_runs = solve_position_ik_batch(
-        [(cascades[i].robot, first, cascades[i].seeds) for i in ready],
-        tolerance=settings.tolerance,
-        max_iterations=settings.max_iterations,
-    )
-    _share(time.perf_counter() - t0, [cascades[i].clock for i in ready], first_runs)
-    for i, runs in zip(ready, first_runs):
-        verdicts[i] = _targets(cascades[i], task, settings, targets, runs)
-    return [verdicts[i] for i in range(len(cascades))]
+    for cascade in cascades:
+        _reach_and_model(cascade, catalog, task, settings, targets)
+    for label, target in targets.items():
+        _at_target([c for c in cascades if c.verdict is None], label, target, settings)
+    for cascade in cascades:
+        if cascade.verdict is None:
+            cascade.verdict = _feasible(cascade)
+    return [cascade.verdict for cascade in cascades]
 
 
 @dataclass
 class _Cascade:
-    """One composition on its way through the cascade: its clock, the figures so far and, once
-    it passes the reach test, its robot model, collision model (built on first use: most
-    compositions fail IK or torque before a collision is measured) and IK seeds."""
+    """One composition on its way through the cascade: its clock, the figures so far, its
+    verdict once there is one and, once it passes the reach test, its robot model, collision
+    model (built on first use: most compositions fail IK or torque before a collision is
+    measured), IK seeds and the configurations that pass every test at each target so far."""
 
     composition: Composition
     clock: _Clock = field(default_factory=_Clock)
     figures: dict[str, float] = field(default_factory=dict)
+    verdict: Verdict | None = None
     robot: RobotModel | None = None
     collision: Callable[[], CollisionModel] | None = None
     seeds: np.ndarray | None = None
+    passing: dict[str, list[np.ndarray]] = field(default_factory=dict)
 
-    def fail(self, test: str, message: str) -> Verdict:
-        return Verdict(self.composition, test, message, self.figures, self.clock.seconds)
+    def fail(self, test: str, message: str) -> None:
+        self.verdict = Verdict(self.composition, test, message, self.figures, self.clock.seconds)
 
 
 def _reach_and_model(
     cascade: _Cascade, catalog: Catalog, task: Task, settings: FeasibilitySettings, targets: dict[str, np.ndarray]
-) -> Verdict | None:
-    """The reach test; if it passes, the models and seeds of ``cascade`` are built (and None returned)."""
+) -> None:
+    """The reach test, then (if it passes) the models and the IK seeds of ``cascade``."""
     t0 = time.perf_counter()
     reach = max_reach(cascade.composition, catalog)
     far_label, far = max(targets.items(), key=lambda item: float(np.linalg.norm(item[1])))
     cascade.figures["reach_margin"] = reach - float(np.linalg.norm(far))
     cascade.clock.time(REACH.name, t0)
     if cascade.figures["reach_margin"] < 0.0:
-        return cascade.fail(
+        cascade.fail(
             REACH.name,
             f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
             f"the arm reaches at most {reach:.3f} m",
         )
+        return
     t0 = time.perf_counter()
     robot = cascade.robot = robot_model(cascade.composition, catalog, task.payload)
     cascade.collision = functools.cache(lambda: CollisionModel(robot, task.obstacles))
     cascade.seeds = ik_seeds(robot, settings.seeds)
     cascade.clock.time("model", t0)
-    return None
+
+
+def _at_target(cascades: list[_Cascade], label: str, target: np.ndarray, settings: FeasibilitySettings) -> None:
+    """IK, static torque and collision at ``target`` for each of ``cascades``; one whose IK
+    solutions all fail the other tests is searched again from more seeds before it fails."""
+    outcomes = _solve(cascades, label, target, [c.seeds for c in cascades], settings)
+    if settings.escalation > 1:
+        again = [i for i, outcome in enumerate(outcomes) if outcome.solutions and not outcome.kept]
+        more = [ik_seeds(cascades[i].robot, settings.seeds * settings.escalation)[settings.seeds :] for i in again]
+        found = _solve([cascades[i] for i in again], label, target, more, settings, [outcomes[i] for i in again])
+        for i, outcome in zip(again, found):
+            outcomes[i] = outcome
+    for cascade, outcome in zip(cascades, outcomes):
+        _judge(cascade, label, outcome)
+
+
+def _solve(
+    cascades: list[_Cascade],
+    label: str,
+    target: np.ndarray,
+    seeds: list[np.ndarray],
+    settings: FeasibilitySettings,
+    earlier: list[_TargetOutcome] | None = None,
+) -> list[_TargetOutcome]:
+    """IK of every cascade from its ``seeds``, together, then torque and collision on every
+    distinct new solution (the ``earlier`` outcomes at the same target, if any, are extended)."""
+    t0 = time.perf_counter()
+    runs = solve_position_ik_batch(
+        [(cascade.robot, target, start) for cascade, start in zip(cascades, seeds)],
+        tolerance=settings.tolerance,
+        max_iterations=settings.max_iterations,
+    )
+    _share(time.perf_counter() - t0, [cascade.clock for cascade in cascades], runs)
+    earlier = earlier or [None] * len(cascades)
+    return [_tests(cascade, label, found, settings, before) for cascade, found, before in zip(cascades, runs, earlier)]
 
 
 def _share(seconds: float, clocks: list[_Clock], runs: list[list[IKResult]]) -> None:
@@ -314,44 +345,38 @@ def _share(seconds: float, clocks: list[_Clock], runs: list[list[IKResult]]) -> 
         clock.seconds[INVERSE_KINEMATICS.name] += seconds * iterations / total
 
 
-def _targets(
-    cascade: _Cascade,
-    task: Task,
-    settings: FeasibilitySettings,
-    targets: dict[str, np.ndarray],
-    first_runs: list[IKResult],
-) -> Verdict:
-    """The IK, torque and collision tests at each target (the IK runs from the first seeds at
-    the first target are given), then the boundary configurations."""
-    robot, collision, figures, clock = cascade.robot, cascade.collision, cascade.figures, cascade.clock
-    passing: dict[str, list[np.ndarray]] = {}
-    for label, target in targets.items():
-        runs = first_runs if not passing else None
-        outcome = _target(robot, collision, target, label, cascade.seeds, settings, clock, runs=runs)
-        if outcome.solutions and not outcome.kept and settings.escalation > 1:
-            more = ik_seeds(robot, settings.seeds * settings.escalation)[settings.seeds :]
-            outcome = _target(robot, collision, target, label, more, settings, clock, outcome)
-        figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
-        if not outcome.solutions:
-            return cascade.fail(
-                INVERSE_KINEMATICS.name,
-                f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m)",
-            )
-        # the composition needs at least its best ratio at every target seen so far
-        figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
-        if not outcome.kept:
-            tests_passed, _, message = outcome.closest
-            return cascade.fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
-        passing[label] = outcome.kept
-    (q_start, q_goal), clear = _boundary_pair(robot, collision(), passing["start"], passing["goal"])
+def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
+    """The figures of ``outcome`` at the target ``label``, and the verdict if the composition fails there."""
+    figures = cascade.figures
+    figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
+    if not outcome.solutions:
+        cascade.fail(
+            INVERSE_KINEMATICS.name,
+            f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m)",
+        )
+        return
+    # the composition needs at least its best ratio at every target seen so far
+    figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
+    if not outcome.kept:
+        tests_passed, _, message = outcome.closest
+        cascade.fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
+        return
+    cascade.passing[label] = outcome.kept
+
+
+def _feasible(cascade: _Cascade) -> Verdict:
+    """The verdict of a composition that passes every test at every target, with its boundary
+    configurations."""
+    robot, collision, figures = cascade.robot, cascade.collision(), cascade.figures
+    (q_start, q_goal), clear = _boundary_pair(robot, collision, cascade.passing["start"], cascade.passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
-    figures["clearance"] = min(collision().min_distance(q) for q in (q_start, q_goal))
+    figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
     return Verdict(
         cascade.composition,
         None,
         "feasible",
         figures,
-        clock.seconds,
+        cascade.clock.seconds,
         tuple(map(float, q_start)),
         tuple(map(float, q_goal)),
         robot.travel_time_bound(q_start, q_goal),
@@ -368,14 +393,13 @@ class _TargetOutcome:
     closest: tuple[int, float, str] | None  # (tests passed, figure, message) of the best reject
 
 
-def _target(robot, collision, target, label, seeds, settings, clock, earlier=None, runs=None) -> _TargetOutcome:
-    """IK from every seed (unless its ``runs`` are given), then torque and collision on every
-    distinct new solution (the ``earlier`` outcome of the same target, if any, is extended)."""
+def _tests(
+    cascade: _Cascade, label: str, runs: list[IKResult], settings: FeasibilitySettings, earlier: _TargetOutcome | None
+) -> _TargetOutcome:
+    """Torque and collision on every distinct new solution of the IK ``runs`` (the ``earlier``
+    outcome at the same target, if any, is extended)."""
+    robot, clock = cascade.robot, cascade.clock
     t0 = time.perf_counter()
-    if runs is None:
-        runs = solve_position_ik_many(
-            robot, target, seeds, tolerance=settings.tolerance, max_iterations=settings.max_iterations
-        )
     known = earlier.solutions if earlier else []
     solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
     clock.time(INVERSE_KINEMATICS.name, t0)
@@ -391,7 +415,7 @@ def _target(robot, collision, target, label, seeds, settings, clock, earlier=Non
             outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
             continue
         t0 = time.perf_counter()
-        clear = _collision_check(collision(), q, label)
+        clear = _collision_check(cascade.collision(), q, label)
         clock.time(COLLISION.name, t0)
         if not clear.passed:
             outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))
