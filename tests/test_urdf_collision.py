@@ -1,5 +1,6 @@
 """Generated URDF structure and FCL distances against hand-computed cases."""
 
+import itertools
 import math
 import subprocess
 import sys
@@ -11,7 +12,14 @@ import pinocchio as pin
 import pytest
 import yourdfpy
 
-from modular_robots import CollisionModel, Composition, SphereObstacle, composition_urdf, robot_model
+from modular_robots import (
+    CollisionModel,
+    Composition,
+    SphereObstacle,
+    composition_urdf,
+    enumerate_compositions,
+    robot_model,
+)
 
 WINNER = "B-J1-L3-J1-L3-J1-L2-J1-L1-E1"
 
@@ -56,6 +64,19 @@ def test_the_pinocchio_model_is_cached_and_every_robot_has_its_own_data(paper_ca
     np.testing.assert_allclose(a.data.oMf[a.tool_frame_id].translation, a.tool_position(np.zeros(2)), atol=0)
     assert not np.allclose(a.data.oMf[a.tool_frame_id].translation, b.data.oMf[b.tool_frame_id].translation)
     assert robot_model(composition, paper_catalog, 5.0) is not robot_model(composition, paper_catalog, 6.0)
+
+
+def test_the_model_built_without_collision_shapes_is_the_full_urdfs(paper_catalog):
+    """robot_model builds Pinocchio's model from the URDF without its collision shapes: every
+    joint, frame, inertia and limit is the one the full text gives, which the robot keeps."""
+    for composition in itertools.islice(enumerate_compositions(paper_catalog), 0, None, 37):
+        robot = robot_model(composition, paper_catalog, 5.0)
+        full = pin.buildModelFromXML(composition_urdf(composition, paper_catalog, 5.0))
+        full.armature = robot.model.armature.copy()
+        assert full == robot.model
+        assert robot.urdf == composition_urdf(composition, paper_catalog, 5.0)
+        assert "<collision>" in robot.urdf
+        assert "<collision>" not in composition_urdf(composition, paper_catalog, 5.0, collision=False)
 
 
 def test_primitives_match_urdf_collision_geometry(paper_catalog, tmp_path):
