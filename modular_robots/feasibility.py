@@ -24,7 +24,7 @@ import functools
 import itertools
 import math
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +34,7 @@ from .collision import CollisionModel
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InputError
 from .execution import Engine, make_engine
-from .ik import DEFAULT_TOLERANCE, distinct, ik_seeds, solve_position_ik
+from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
 from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
 
@@ -46,6 +46,7 @@ __all__ = [
     "TESTS",
     "max_reach",
     "check_composition",
+    "check_compositions",
     "filter_compositions",
     "composition_space",
     "estimate_seconds",
@@ -149,23 +150,39 @@ def _rx(angle: float) -> np.ndarray:
 
 def max_reach(composition: Composition, catalog: Catalog) -> float:
     """Upper bound on the tool's distance from the base origin [m], from catalogue numbers."""
-    total = 0.0
-    rotation, offset, strokes = np.eye(3), np.zeros(3), []
+    total, _, offset, strokes = _reach_along(catalog, composition.modules)
+    return total + _piece_reach(offset, strokes)
 
-    def piece() -> float:
-        corners = itertools.product(*[(lo * axis, hi * axis) for axis, lo, hi in strokes])
-        return max(float(np.linalg.norm(offset + sum(c, np.zeros(3)))) for c in corners)
 
-    for module in (catalog.module(m) for m in composition.modules):
-        rotation = rotation @ _rx(module.twist_in)
-        if module.joint == "revolute":
-            total += piece()
-            rotation, offset, strokes = np.eye(3), np.zeros(3), []
-        elif module.joint == "prismatic":
-            strokes.append((rotation[:, 2].copy(), module.limits.lower, module.limits.upper))
-        offset = offset + module.length * rotation[:, 2]
-        rotation = rotation @ _rx(module.twist_out)
-    return total + piece()
+_Stroke = tuple[np.ndarray, float, float]
+
+
+@functools.lru_cache(maxsize=16384)  # compositions share their chains but for the last modules
+def _reach_along(
+    catalog: Catalog, modules: tuple[str, ...]
+) -> tuple[float, np.ndarray, np.ndarray, tuple[_Stroke, ...]]:
+    """After the chain ``modules``: the bound on the distance covered by its rigid pieces that end
+    at a revolute axis, and the open piece's rotation, offset and prismatic strokes (axis, lower,
+    upper) since the last revolute axis."""
+    if not modules:
+        return 0.0, np.eye(3), np.zeros(3), ()
+    total, rotation, offset, strokes = _reach_along(catalog, modules[:-1])
+    module = catalog.module(modules[-1])
+    rotation = rotation @ _rx(module.twist_in)
+    if module.joint == "revolute":
+        total += _piece_reach(offset, strokes)
+        rotation, offset, strokes = np.eye(3), np.zeros(3), ()
+    elif module.joint == "prismatic":
+        strokes = (*strokes, (rotation[:, 2].copy(), module.limits.lower, module.limits.upper))
+    offset = offset + module.length * rotation[:, 2]
+    return total, rotation @ _rx(module.twist_out), offset, strokes
+
+
+def _piece_reach(offset: np.ndarray, strokes: tuple[_Stroke, ...]) -> float:
+    """The largest length of a rigid piece with ``offset`` and prismatic ``strokes``: at a corner
+    of the strokes."""
+    corners = itertools.product(*[(lo * axis, hi * axis) for axis, lo, hi in strokes])
+    return max(float(np.linalg.norm(offset + sum(c, np.zeros(3)))) for c in corners)
 
 
 # -- tests 2 and 3: per configuration ---------------------------------------------------------
@@ -212,59 +229,154 @@ def check_composition(
     composition: Composition, catalog: Catalog, task: Task, settings: FeasibilitySettings = FeasibilitySettings()
 ) -> Verdict:
     """Run the cascade on one composition; never raises for an infeasible one."""
-    clock = _Clock()
-    figures: dict[str, float] = {}
+    return check_compositions([composition], catalog, task, settings)[0]
+
+
+def check_compositions(
+    compositions: Sequence[Composition],
+    catalog: Catalog,
+    task: Task,
+    settings: FeasibilitySettings = FeasibilitySettings(),
+) -> list[Verdict]:
+    """:func:`check_composition` of each composition, a test at a time for all of them: the IK
+    runs at a target of every composition still in the cascade run together
+    (:func:`~modular_robots.ik.solve_position_ik_batch`).
+
+    IK is most of step B's work, and an IK iteration costs less per seed the more seeds share it
+    (about half as much with 64 seeds as with 8), while every result stays the one a
+    composition's own IK gives: the verdicts are those of :func:`check_composition`, bit for bit.
+    A shared IK's seconds are split among the compositions in proportion to their IK iterations.
+    """
     targets = {"start": np.asarray(task.start, dtype=float), "goal": np.asarray(task.goal, dtype=float)}
+    cascades = [_Cascade(composition) for composition in compositions]
+    for cascade in cascades:
+        _reach_and_model(cascade, catalog, task, settings, targets)
+    for label, target in targets.items():
+        _at_target([c for c in cascades if c.verdict is None], label, target, settings)
+    for cascade in cascades:
+        if cascade.verdict is None:
+            cascade.verdict = _feasible(cascade)
+    return [cascade.verdict for cascade in cascades]
 
-    def fail(test: str, message: str) -> Verdict:
-        return Verdict(composition, test, message, figures, clock.seconds)
 
+@dataclass
+class _Cascade:
+    """One composition on its way through the cascade: its clock, the figures so far, its
+    verdict once there is one and, once it passes the reach test, its robot model, collision
+    model (built on first use: most compositions fail IK or torque before a collision is
+    measured), IK seeds and the configurations that pass every test at each target so far."""
+
+    composition: Composition
+    clock: _Clock = field(default_factory=_Clock)
+    figures: dict[str, float] = field(default_factory=dict)
+    verdict: Verdict | None = None
+    robot: RobotModel | None = None
+    collision: Callable[[], CollisionModel] | None = None
+    seeds: np.ndarray | None = None
+    passing: dict[str, list[np.ndarray]] = field(default_factory=dict)
+
+    def fail(self, test: str, message: str) -> None:
+        self.verdict = Verdict(self.composition, test, message, self.figures, self.clock.seconds)
+
+
+def _reach_and_model(
+    cascade: _Cascade, catalog: Catalog, task: Task, settings: FeasibilitySettings, targets: dict[str, np.ndarray]
+) -> None:
+    """The reach test, then (if it passes) the models and the IK seeds of ``cascade``."""
     t0 = time.perf_counter()
-    reach = max_reach(composition, catalog)
+    reach = max_reach(cascade.composition, catalog)
     far_label, far = max(targets.items(), key=lambda item: float(np.linalg.norm(item[1])))
-    figures["reach_margin"] = reach - float(np.linalg.norm(far))
-    clock.time(REACH.name, t0)
-    if figures["reach_margin"] < 0.0:
-        return fail(
+    cascade.figures["reach_margin"] = reach - float(np.linalg.norm(far))
+    cascade.clock.time(REACH.name, t0)
+    if cascade.figures["reach_margin"] < 0.0:
+        cascade.fail(
             REACH.name,
             f"reach: the {far_label} is {np.linalg.norm(far):.3f} m from the base, "
             f"the arm reaches at most {reach:.3f} m",
         )
-
+        return
     t0 = time.perf_counter()
-    robot = robot_model(composition, catalog, task.payload)
-    # built on first use: most compositions fail IK or torque before a collision is measured
-    collision = functools.cache(lambda: CollisionModel(robot, task.obstacles))
-    seeds = ik_seeds(robot, settings.seeds)
-    clock.time("model", t0)
+    robot = cascade.robot = robot_model(cascade.composition, catalog, task.payload)
+    cascade.collision = functools.cache(lambda: CollisionModel(robot, task.obstacles))
+    cascade.seeds = ik_seeds(robot, settings.seeds)
+    cascade.clock.time("model", t0)
 
-    passing: dict[str, list[np.ndarray]] = {}
-    for label, target in targets.items():
-        outcome = _target(robot, collision, target, label, seeds, settings, clock)
-        if outcome.solutions and not outcome.kept and settings.escalation > 1:
-            more = ik_seeds(robot, settings.seeds * settings.escalation)[settings.seeds :]
-            outcome = _target(robot, collision, target, label, more, settings, clock, outcome)
-        figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
-        if not outcome.solutions:
-            return fail(
-                INVERSE_KINEMATICS.name,
-                f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m)",
-            )
-        # the composition needs at least its best ratio at every target seen so far
-        figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
-        if not outcome.kept:
-            tests_passed, _, message = outcome.closest
-            return fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
-        passing[label] = outcome.kept
-    (q_start, q_goal), clear = _boundary_pair(robot, collision(), passing["start"], passing["goal"])
+
+def _at_target(cascades: list[_Cascade], label: str, target: np.ndarray, settings: FeasibilitySettings) -> None:
+    """IK, static torque and collision at ``target`` for each of ``cascades``; one whose IK
+    solutions all fail the other tests is searched again from more seeds before it fails."""
+    outcomes = _solve(cascades, label, target, [c.seeds for c in cascades], settings)
+    if settings.escalation > 1:
+        again = [i for i, outcome in enumerate(outcomes) if outcome.solutions and not outcome.kept]
+        more = [ik_seeds(cascades[i].robot, settings.seeds * settings.escalation)[settings.seeds :] for i in again]
+        found = _solve([cascades[i] for i in again], label, target, more, settings, [outcomes[i] for i in again])
+        for i, outcome in zip(again, found):
+            outcomes[i] = outcome
+    for cascade, outcome in zip(cascades, outcomes):
+        _judge(cascade, label, outcome)
+
+
+def _solve(
+    cascades: list[_Cascade],
+    label: str,
+    target: np.ndarray,
+    seeds: list[np.ndarray],
+    settings: FeasibilitySettings,
+    earlier: list[_TargetOutcome] | None = None,
+) -> list[_TargetOutcome]:
+    """IK of every cascade from its ``seeds``, together, then torque and collision on every
+    distinct new solution (the ``earlier`` outcomes at the same target, if any, are extended)."""
+    t0 = time.perf_counter()
+    runs = solve_position_ik_batch(
+        [(cascade.robot, target, start) for cascade, start in zip(cascades, seeds)],
+        tolerance=settings.tolerance,
+        max_iterations=settings.max_iterations,
+    )
+    _share(time.perf_counter() - t0, [cascade.clock for cascade in cascades], runs)
+    earlier = earlier or [None] * len(cascades)
+    return [_tests(cascade, label, found, settings, before) for cascade, found, before in zip(cascades, runs, earlier)]
+
+
+def _share(seconds: float, clocks: list[_Clock], runs: list[list[IKResult]]) -> None:
+    """Split the ``seconds`` of a shared IK among ``clocks`` in proportion to their ``runs``' iterations."""
+    work = [sum(run.iterations for run in found) for found in runs]
+    total = max(sum(work), 1)
+    for clock, iterations in zip(clocks, work):
+        clock.seconds[INVERSE_KINEMATICS.name] += seconds * iterations / total
+
+
+def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
+    """The figures of ``outcome`` at the target ``label``, and the verdict if the composition fails there."""
+    figures = cascade.figures
+    figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
+    if not outcome.solutions:
+        cascade.fail(
+            INVERSE_KINEMATICS.name,
+            f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m)",
+        )
+        return
+    # the composition needs at least its best ratio at every target seen so far
+    figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
+    if not outcome.kept:
+        tests_passed, _, message = outcome.closest
+        cascade.fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
+        return
+    cascade.passing[label] = outcome.kept
+
+
+def _feasible(cascade: _Cascade) -> Verdict:
+    """The verdict of a composition that passes every test at every target, with its boundary
+    configurations."""
+    robot, collision, figures = cascade.robot, cascade.collision(), cascade.figures
+    (q_start, q_goal), clear = _boundary_pair(robot, collision, cascade.passing["start"], cascade.passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
-    figures["clearance"] = min(collision().min_distance(q) for q in (q_start, q_goal))
+    figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
     return Verdict(
-        composition,
+        cascade.composition,
         None,
         "feasible",
         figures,
-        clock.seconds,
+        cascade.clock.seconds,
         tuple(map(float, q_start)),
         tuple(map(float, q_goal)),
         robot.travel_time_bound(q_start, q_goal),
@@ -281,14 +393,13 @@ class _TargetOutcome:
     closest: tuple[int, float, str] | None  # (tests passed, figure, message) of the best reject
 
 
-def _target(robot, collision, target, label, seeds, settings, clock, earlier=None) -> _TargetOutcome:
-    """IK from every seed, then torque and collision on every distinct new solution (the
-    ``earlier`` outcome of the same target, if any, is extended)."""
+def _tests(
+    cascade: _Cascade, label: str, runs: list[IKResult], settings: FeasibilitySettings, earlier: _TargetOutcome | None
+) -> _TargetOutcome:
+    """Torque and collision on every distinct new solution of the IK ``runs`` (the ``earlier``
+    outcome at the same target, if any, is extended)."""
+    robot, clock = cascade.robot, cascade.clock
     t0 = time.perf_counter()
-    runs = [
-        solve_position_ik(robot, target, q0, tolerance=settings.tolerance, max_iterations=settings.max_iterations)
-        for q0 in seeds
-    ]
     known = earlier.solutions if earlier else []
     solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
     clock.time(INVERSE_KINEMATICS.name, t0)
@@ -304,7 +415,7 @@ def _target(robot, collision, target, label, seeds, settings, clock, earlier=Non
             outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
             continue
         t0 = time.perf_counter()
-        clear = _collision_check(collision(), q, label)
+        clear = _collision_check(cascade.collision(), q, label)
         clock.time(COLLISION.name, t0)
         if not clear.passed:
             outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))
@@ -336,7 +447,7 @@ def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals):
 # -- many compositions -------------------------------------------------------------------------
 def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
     catalog, task, settings = context
-    return [check_composition(c, catalog, task, settings) for c in chunk]
+    return check_compositions(chunk, catalog, task, settings)
 
 
 #: CPU seconds of step B per composition on the paper's catalogue (``benchmarks/bench_feasibility.py``
@@ -396,14 +507,16 @@ def filter_compositions(
     ``max_compositions``, see :func:`composition_space`), in input order.
 
     Streams: compositions are drawn lazily and at most a few chunks are in flight, on every
-    core by default. Verdicts do not depend on the engine or its number of workers.
+    core by default. Verdicts do not depend on the engine or its number of workers. A chunk of
+    16 compositions runs its IK together (:func:`check_compositions`): 10 % less CPU than 8 on
+    the paper catalogue, and a chunk still takes only tens of milliseconds.
     """
     engine = engine or make_engine()
     if compositions is None:
         composition_space(scenario.catalog, max_compositions, engine.jobs)
         compositions = enumerate_compositions(scenario.catalog)
     context = (scenario.catalog, scenario.task, settings)
-    yield from engine.map_chunks(_check_chunk, context, compositions, chunksize=8)
+    yield from engine.map_chunks(_check_chunk, context, compositions, chunksize=16)
 
 
 @dataclass

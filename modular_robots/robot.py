@@ -244,11 +244,10 @@ def robot_model(composition: Composition, catalog: Catalog, payload: float = 0.0
 
 @lru_cache(maxsize=256)
 def _pinocchio_model(composition: Composition, catalog: Catalog, payload: float) -> tuple[pin.Model, str]:
-    urdf = composition_urdf(composition, catalog, payload)
-    model = pin.buildModelFromXML(urdf)
+    model = pin.buildModelFromXML(composition_urdf(composition, catalog, payload, collision=False))
     joint_modules = [catalog.module(m) for m in composition.modules if catalog.module(m).dof]
     model.armature = np.array([m.armature for m in joint_modules], dtype=float)
-    return model, urdf
+    return model, composition_urdf(composition, catalog, payload)
 
 
 def robot_from_urdf(urdf: str, armature=None, tool_frame: str = "tool0", name: str = "") -> RobotModel:

@@ -19,8 +19,15 @@ from modular_robots import (
 )
 from modular_robots.cli import main
 from modular_robots.execution import ProcessEngine, SerialEngine
-from modular_robots.feasibility import TESTS, FeasibilitySummary, check_composition, filter_compositions, max_reach
-from modular_robots.ik import _lm_step, ik_seeds, solve_position_ik
+from modular_robots.feasibility import (
+    TESTS,
+    FeasibilitySummary,
+    check_composition,
+    check_compositions,
+    filter_compositions,
+    max_reach,
+)
+from modular_robots.ik import _lm_steps, ik_seeds, solve_position_ik, solve_position_ik_batch, solve_position_ik_many
 
 from .conftest import PAPER_5KG, PAPER_CATALOG
 
@@ -103,6 +110,26 @@ def test_ik_converges_from_every_seed_on_a_reachable_target(paper_catalog):
             assert np.linalg.norm(robot.tool_position(r.q) - target) == pytest.approx(r.error, abs=1e-12)
 
 
+def test_ik_runs_in_lockstep_give_the_runs_of_their_own(paper_catalog):
+    """Seeds that stop early, stall, or push joints against their limits, on robots of two, four
+    and five joints (two robots of two and of five): each run of solve_position_ik_many, and of
+    one solve_position_ik_batch over every robot and target, is bit for bit the run
+    solve_position_ik makes from its seed alone."""
+    scenario = load_scenario(PAPER_5KG)
+    names = ("B-J1-L3-J1-L1-J1-L3-E1", "B-J1-L3-J1-L3-J2-L2-J1-L1-E1", "B-J1-L2-J1-L3-J2-L1-J1-L2-E1", "B-J2-L2-E2")
+    problems = []
+    for name in (*names, "B-J1-L2-E1"):
+        robot = robot_model(Composition.from_name(name, paper_catalog), paper_catalog, 0.0)
+        for target in (scenario.task.start, scenario.task.goal, (0.0, 0.0, 1.1)):
+            problems.append((robot, np.array(target), ik_seeds(robot, 16)))
+    batch = solve_position_ik_batch(problems)
+    key = lambda run: (run.q.tobytes(), run.error, run.iterations)  # noqa: E731
+    for (robot, target, seeds), together in zip(problems, batch):
+        alone = [key(solve_position_ik(robot, target, q0)) for q0 in seeds]
+        assert [key(run) for run in solve_position_ik_many(robot, target, seeds)] == alone
+        assert [key(run) for run in together] == alone
+
+
 def test_lm_step_matches_the_plain_normal_equations():
     rng = np.random.default_rng(0)
     for n in range(1, 7):
@@ -110,7 +137,9 @@ def test_lm_step_matches_the_plain_normal_equations():
         norm = float(np.linalg.norm(error))
         damping = 0.5 * norm * norm + 1e-4
         reference = np.linalg.solve(jacobian.T @ jacobian + damping * np.eye(n), jacobian.T @ error)
-        np.testing.assert_allclose(_lm_step(jacobian, error, norm), reference, rtol=1e-10, atol=1e-13)
+        np.testing.assert_allclose(
+            _lm_steps(jacobian[None], [error.tolist()], [norm])[0], reference, rtol=1e-10, atol=1e-13
+        )
 
 
 # -- collision -----------------------------------------------------------------------------------
@@ -180,6 +209,19 @@ def test_same_verdicts_with_one_and_two_workers():
     key = lambda v: (v.composition, v.failed_test, v.message, v.q_start, v.q_goal, v.time_bound)  # noqa: E731
     assert [key(v) for v in one] == [key(v) for v in two]
     assert any(v.passed for v in one) and any(not v.passed for v in one)
+
+
+def test_compositions_checked_together_get_their_own_verdicts():
+    """check_compositions runs the start IK of a whole chunk in lockstep (mixed DOF, some failing
+    the reach test, some feasible): every verdict is the one check_composition gives alone."""
+    scenario = load_scenario(PAPER_5KG)
+    sample = list(itertools.islice(enumerate_compositions(scenario.catalog), 0, None, 97))
+    together = check_compositions(sample, scenario.catalog, scenario.task)
+    alone = [check_composition(c, scenario.catalog, scenario.task) for c in sample]
+    key = lambda v: (v.to_json(), v.time_bound, v.clear_pair)  # noqa: E731
+    assert [key(v) for v in together] == [key(v) for v in alone]
+    assert {v.failed_test for v in together} >= {None, "reach", "inverse kinematics"}
+    assert len({v.composition.dof for v in together}) > 1
 
 
 def test_filter_cli_on_a_small_catalogue(tmp_path):

@@ -1,5 +1,6 @@
 """Generated URDF structure and FCL distances against hand-computed cases."""
 
+import itertools
 import math
 import subprocess
 import sys
@@ -11,7 +12,14 @@ import pinocchio as pin
 import pytest
 import yourdfpy
 
-from modular_robots import CollisionModel, Composition, SphereObstacle, composition_urdf, robot_model
+from modular_robots import (
+    CollisionModel,
+    Composition,
+    SphereObstacle,
+    composition_urdf,
+    enumerate_compositions,
+    robot_model,
+)
 
 WINNER = "B-J1-L3-J1-L3-J1-L2-J1-L1-E1"
 
@@ -56,6 +64,19 @@ def test_the_pinocchio_model_is_cached_and_every_robot_has_its_own_data(paper_ca
     np.testing.assert_allclose(a.data.oMf[a.tool_frame_id].translation, a.tool_position(np.zeros(2)), atol=0)
     assert not np.allclose(a.data.oMf[a.tool_frame_id].translation, b.data.oMf[b.tool_frame_id].translation)
     assert robot_model(composition, paper_catalog, 5.0) is not robot_model(composition, paper_catalog, 6.0)
+
+
+def test_the_model_built_without_collision_shapes_is_the_full_urdfs(paper_catalog):
+    """robot_model builds Pinocchio's model from the URDF without its collision shapes: every
+    joint, frame, inertia and limit is the one the full text gives, which the robot keeps."""
+    for composition in itertools.islice(enumerate_compositions(paper_catalog), 0, None, 37):
+        robot = robot_model(composition, paper_catalog, 5.0)
+        full = pin.buildModelFromXML(composition_urdf(composition, paper_catalog, 5.0))
+        full.armature = robot.model.armature.copy()
+        assert full == robot.model
+        assert robot.urdf == composition_urdf(composition, paper_catalog, 5.0)
+        assert "<collision>" in robot.urdf
+        assert "<collision>" not in composition_urdf(composition, paper_catalog, 5.0, collision=False)
 
 
 def test_primitives_match_urdf_collision_geometry(paper_catalog, tmp_path):
@@ -212,6 +233,26 @@ def test_signed_distance_runs_straight_through_contact(paper_catalog):
     for gap in (3e-3, 1e-4, 1e-7, -1e-7, -1e-4, -3e-3):
         d, *_ = _distance_to(robot, q, "m2_L2_capsule", (0.3 + gap, 0.0, 0.6), 0.2)
         assert d == pytest.approx(gap, abs=1e-9), gap
+
+
+def test_path_clear_answers_as_the_closest_distances_do(paper_catalog):
+    """path_clear decides most samples from axis bounds; on random segments, some through the
+    obstacles, and at clearances exactly at the closest sampled distances, its answer is that of
+    the smallest distance closest_many measures."""
+    robot = robot_model(Composition.from_name("B-J1-L1-J2-L3-J1-L2-E1", paper_catalog), paper_catalog, 5.0)
+    obstacles = [SphereObstacle((0.9, -0.6, 0.9), 0.25), SphereObstacle((-0.5, 0.8, 0.4), 0.3)]
+    model = CollisionModel(robot, obstacles)
+    rng = np.random.default_rng(11)
+    s = np.linspace(0.0, 1.0, 25)[:, None]
+    answers = set()
+    for _ in range(60):
+        a, b = rng.uniform(robot.lower, robot.upper, (2, robot.nv))
+        closest = model.closest_many(a + s * (b - a))[0].min()
+        for clearance in (0.02, closest, np.nextafter(closest, np.inf), closest + 1e-9, closest - 1e-9):
+            answer = model.path_clear(np.array([a, b]), clearance=clearance)
+            assert answer == (closest >= clearance)
+            answers.add(answer)
+    assert answers == {True, False}
 
 
 def test_closest_many_equals_every_pair_measured_and_its_gradient(paper_catalog):
