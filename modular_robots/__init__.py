@@ -22,6 +22,7 @@ from .exceptions import (
     InfeasibleError,
     InputError,
     ModularRobotsError,
+    ResultsFolderError,
     ScenarioError,
     Terminated,
 )
@@ -77,6 +78,7 @@ __all__ = [
     "CompositionError",
     "Distances",
     "FolderBusyError",
+    "ResultsFolderError",
     "ResultsFolder",
     "Terminated",
     "FeasibilitySettings",

@@ -9,6 +9,7 @@ Every file is written to a temporary name and renamed into place
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -26,6 +27,8 @@ __all__ = [
     "plot_pruning_history",
     "write_pruning_plot",
     "write_winner_files",
+    "export_name",
+    "is_export",
     "URDF",
     "TRAJECTORY",
     "JOINTS_PLOT",
@@ -40,6 +43,22 @@ JOINTS_PLOT = "joints.png"
 PRUNING_PLOT = "pruning.png"
 #: The files a run writes besides ``result.json`` (and only when it has a winner).
 WINNER_FILES = (URDF, TRAJECTORY, JOINTS_PLOT, PRUNING_PLOT)
+#: ``export``'s files: the plan at a controller rate (:func:`export_name`) and as a ROS
+#: ``JointTrajectory``.
+JOINT_TRAJECTORY = "trajectory.json"
+_EXPORT = re.compile(r"trajectory_[0-9]+(\.[0-9]+)?hz\.csv")
+
+
+def export_name(rate: float) -> str:
+    """``trajectory_<rate>hz.csv``, the rate written in full (``333.3333``, ``1000``): the name
+    says the file's exact rate."""
+    text = repr(float(rate))
+    return f"trajectory_{text.removesuffix('.0')}hz.csv"
+
+
+def is_export(name: str) -> bool:
+    """Whether ``name`` is one of ``export``'s files."""
+    return name == JOINT_TRAJECTORY or _EXPORT.fullmatch(name) is not None
 
 
 def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -> dict[str, str]:

@@ -28,6 +28,7 @@ from modular_robots.cli import main
 from modular_robots.collision import CULL_DISTANCE, CollisionModel, reach_bound
 from modular_robots.folder import LOCK, ResultsFolder
 from modular_robots.pipeline import run_scenario
+from modular_robots.recorder import previous_files
 from modular_robots.robot import robot_model
 
 from .conftest import ROOT
@@ -152,19 +153,36 @@ def test_a_file_size_limit_ends_the_run_as_failed_with_a_sentence(tmp_path):
 
 
 # -- 2 and 3. a folder holds one run's files, and one run at a time ---------------------------------
-def test_a_run_removes_the_previous_runs_winner_files(tmp_path):
+def test_a_run_removes_the_previous_runs_files_and_no_other(tmp_path):
+    """Only names this package writes, only in a folder whose result.json is ours and names them,
+    and only our own temporary files: never the lock, a user's file or a user's ``.x.tmp``."""
     out = tmp_path / "out"
     out.mkdir()
-    (out / "winner.urdf").write_text("<robot/>")
-    (out / "old-trajectory.csv").write_text("t\n")
-    (out / "notes.txt").write_text("mine")
-    (out / ".trajectory.csv.tmp").write_text("half")
-    (out / "result.json").write_text(json.dumps({"winner": {"files": {"trajectory": "old-trajectory.csv"}}}))
+    named = {"urdf": "winner.urdf", "trajectory": "trajectory.csv", "lock": ".lock", "notes": "notes.txt"}
+    (out / "result.json").write_text(json.dumps({"status": "done", "settings": {}, "winner": {"files": named}}))
+    ours = ["winner.urdf", "trajectory.csv", "trajectory_100hz.csv", "trajectory.json"]
+    theirs = ["notes.txt", ".session.tmp", ".notes.tmp.bak", ".vimrc.tmpl", "trajectory_fast.csv"]
+    for name in [*ours, *theirs, ".trajectory.k2j4h1g0.modular-robots-tmp.csv"]:  # the last: a crashed writer's
+        (out / name).write_text("x")
     infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
     result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(out)])
     assert result.exit_code == 1 and "no composition is feasible" in result.output
     assert _document(out)["status"] == "infeasible"
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "result.json"]  # the user's file stays
+    assert sorted(p.name for p in out.iterdir()) == sorted(["result.json", *theirs])
+
+
+def test_a_folder_without_our_result_json_keeps_every_file(tmp_path):
+    home = tmp_path / "home"
+    home.mkdir()
+    names = [".vimrc.tmpl", ".session.tmp", ".notes.tmp.bak", "joints.png", "winner.urdf", "thesis.tex"]
+    for name in names:
+        (home / name).write_text("mine")
+    (home / "result.json").write_text('{"winner": {"files": {"plot": "joints.png"}}}')  # not a run's
+    infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
+    result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(home)])
+    assert result.exit_code == 1
+    assert sorted(p.name for p in home.iterdir()) == sorted(["result.json", *names])
+    assert all((home / name).read_text() == "mine" for name in names)
 
 
 def test_a_second_run_into_a_locked_folder_is_refused(tmp_path):
@@ -178,6 +196,32 @@ def test_a_second_run_into_a_locked_folder_is_refused(tmp_path):
         "wait for it to end or choose another folder (--out)"
     )
     assert sorted(p.name for p in out.iterdir()) == []  # the lock is released, nothing was written
+
+
+@pytest.mark.parametrize("plant", ["symlink", "hard link", "fifo"])
+def test_a_planted_lock_file_is_refused_and_what_it_points_to_is_untouched(tmp_path, plant):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    {"symlink": lambda: os.symlink(victim, out / LOCK), "hard link": lambda: os.link(victim, out / LOCK)}.get(
+        plant, lambda: os.mkfifo(out / LOCK)
+    )()
+    result = CliRunner().invoke(main, ["run", str(SMALL), "--jobs", "1", "--out", str(out)])
+    got = {"symlink": "a symbolic link", "hard link": "a file with another name too", "fifo": "a device or pipe"}[plant]
+    assert result.exit_code == 1
+    assert result.output.splitlines()[-1] == (
+        f"Error: {out}/.lock: expected the lock file of a results folder, got {got}; "
+        "remove it (no run of this package made it) and run again"
+    )
+    assert victim.read_text() == "precious\n" and sorted(p.name for p in out.iterdir()) == [LOCK]
+
+
+def test_a_forged_result_json_cannot_name_the_lock_or_a_users_file(tmp_path):
+    (tmp_path / "result.json").write_text(
+        json.dumps({"status": "done", "settings": {}, "winner": {"files": {"a": ".lock", "b": "keep.txt"}}})
+    )
+    assert previous_files(tmp_path) == []
 
 
 def test_filter_checks_its_output_before_step_b(tmp_path):
