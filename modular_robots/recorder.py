@@ -31,7 +31,7 @@ from .ocp.trajectory import Trajectory
 from .ocp.verification import Verification
 from .report import RESULT, WINNER_FILES, is_export, write_pruning_plot, write_winner_files
 from .scenario import Scenario
-from .viewer import VIEWER, write_viewer
+from .viewer import VIEWER, write_page
 
 __all__ = ["RunRecorder", "RESULT", "STATUSES", "previous_files"]
 
@@ -142,7 +142,7 @@ class RunRecorder:
                     files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
                 self.winner = _winner_json(winner, files, tracking, approach)
                 self._write()  # the page is drawn from the folder's files, result.json included
-                files["viewer"] = write_viewer(self.path)
+                files["viewer"] = write_page(self.path)
             except BaseException:  # no winner file without a result.json that names it
                 self.winner = None
                 after = _identities(self.path, before)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import shutil
 import signal
@@ -404,6 +405,84 @@ def test_export_and_view_refuse_a_damaged_trajectory_naming_row_and_column(finis
         assert result.exit_code == 1, result.output
         assert result.output == f"Error: {folder}/{message}\n"
     assert not (folder / "trajectory.json").exists()
+
+
+def test_export_and_view_refuse_a_row_that_breaks_the_acceleration_contract(finished, tmp_path):
+    """A last row moved to t = 1e9 (which once made export allocate terabytes)."""
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    rows = (folder / "trajectory.csv").read_text().splitlines()
+    rows[-1] = "1e9" + rows[-1][rows[-1].index(",") :]
+    (folder / "trajectory.csv").write_text("\n".join(rows) + "\n")
+    for command in (["export", str(folder)], ["view", str(folder)]):
+        result = CliRunner().invoke(main, command)
+        assert result.exit_code == 1
+        assert re.fullmatch(
+            rf"Error: {folder}/trajectory\.csv:{len(rows)}: column q1: expected \S+ \(the row before under the "
+            r"acceleration contract\), got \S+\n",
+            result.output,
+        ), result.output
+
+
+def test_export_refuses_more_rows_than_a_controller_could_use(finished, tmp_path):
+    """A plan that rests at its goal until t = 2000 s is a plan (the page shows it), but not a
+    million rows a second."""
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    rows = (folder / "trajectory.csv").read_text().splitlines()
+    rows.append("2000" + rows[-1][rows[-1].index(",") :])
+    (folder / "trajectory.csv").write_text("\n".join(rows) + "\n")
+    result = CliRunner().invoke(main, ["export", str(folder), "--rate", "1000"])
+    assert result.exit_code == 1
+    assert result.output == (
+        f"Error: {folder}: rate: 1000 Hz over the plan's 2000 s makes 2e+06 rows; expected at most 1,000,000 "
+        "(a lower rate)\n"
+    )
+    assert CliRunner().invoke(main, ["view", str(folder)]).exit_code == 0
+
+
+@pytest.mark.parametrize("command", ["export", "view"])
+def test_export_and_view_refuse_a_damaged_winner_alike(finished, tmp_path, command):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    (folder / "winner.urdf").write_text("")
+    result = CliRunner().invoke(main, [command, str(folder)])
+    assert result.output == (
+        f"Error: {folder}/winner.urdf: expected the URDF a run writes (The XML stream does not contain a valid URDF "
+        "model.)\n"
+    )
+    shutil.copy(finished / "winner.urdf", folder / "winner.urdf")
+    document = _document(folder)
+    document["winner"]["drive"]["armature"] = [1.0]
+    (folder / "result.json").write_text(json.dumps(document))
+    result = CliRunner().invoke(main, [command, str(folder)])
+    assert result.output == (
+        f"Error: {folder}/result.json: winner.drive.armature: expected {document['winner']['dof']} numbers >= 0 "
+        "(one per joint), got [1.0]\n"
+    )
+
+
+def test_export_names_its_rate_exactly(finished, tmp_path):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    result = CliRunner().invoke(main, ["export", str(folder), "--rate", "333.3333"])
+    assert result.exit_code == 0, result.output
+    assert (folder / "trajectory_333.3333hz.csv").is_file()
+
+
+def test_export_and_view_wait_for_a_run_writing_into_the_folder(finished, tmp_path):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    before = sorted(p.name for p in folder.iterdir())
+    with ResultsFolder(folder):
+        for command, verb in (("export", "export"), ("view", "view")):
+            result = CliRunner().invoke(main, [command, str(folder)])
+            assert result.exit_code == 1
+            assert result.output == (
+                f"Error: {folder}: another run is writing into this results folder (process {os.getpid()}); "
+                f"{verb} it once that run has ended\n"
+            )
+    assert sorted(p.name for p in folder.iterdir()) == before
 
 
 def test_export_of_a_run_without_winner_says_so(finished, tmp_path):
