@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import functools
 import json
 import math
@@ -103,21 +104,101 @@ class _Number(click.ParamType):
         return number
 
 
+#: Linux's limits on a file or folder name (``NAME_MAX``) and on a whole path (``PATH_MAX``, its
+#: final NUL included) [bytes].
+NAME_MAX, PATH_MAX = 255, 4096
+
+
+def _path_problem(path: Path) -> str | None:
+    """Why ``path`` can be neither opened nor created, or None: a name or the whole path too long,
+    a loop of symbolic links. Said before any work, without echoing a huge path."""
+    for part in path.parts:
+        if len(os.fsencode(part)) > NAME_MAX:
+            return f"{shorten(part)}: a file or folder name is at most {NAME_MAX} bytes"
+    size = len(os.fsencode(os.path.abspath(path)))
+    if size >= PATH_MAX:
+        return f"{shorten(str(path), 200)}: a path is at most {PATH_MAX - 1} bytes, this one has {size}"
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"{shorten(str(path), 200)}: a loop of symbolic links"
+        if exc.errno == errno.ENAMETOOLONG:
+            return f"{shorten(str(path), 200)}: {exc.strerror}"
+    return None
+
+
+def _output_path(text: str, kind: str) -> Path:
+    """``text`` as the path of an output (a results folder, a file): checked before any work, so
+    that hours of it are never lost to a name that cannot be written. It must be UTF-8 (it is
+    written into ``result.json`` and the page), and :func:`_path_problem` must find nothing."""
+    if not text.strip():
+        raise click.BadParameter(f"expected {kind}, got an empty name")
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        code = ord(text[exc.start])
+        byte = f"the byte 0x{code - 0xDC00:02x}" if 0xDC80 <= code <= 0xDCFF else f"the character U+{code:04X}"
+        raise click.BadParameter(
+            f"{shorten(text, 200)}: expected a name in UTF-8 (it is written into the results), got {byte}"
+        ) from None
+    problem = _path_problem(Path(text))
+    if problem:
+        raise click.BadParameter(problem)
+    return Path(text)
+
+
 def _folder_name(ctx, param, text: str | None) -> Path | None:
-    """``--out``: a usable path, checked before any work."""
+    """``--out`` of ``run`` and ``optimize``: a usable results folder (:func:`_output_path`)."""
     if text is None:
         return None
-    if not text.strip():
-        raise click.BadParameter("expected a folder, got an empty name")
-    value = Path(text)
-    for part in value.parts:
-        if len(os.fsencode(part)) > 255:
-            raise click.BadParameter(f"{shorten(part)}: a file or folder name is at most 255 bytes")
+    value = _output_path(text, "a folder")
     if value.exists() and not value.is_dir():
         raise click.BadParameter(f"{shorten(value, 200, quote=False)} exists and is not a folder")
     if value.resolve() == Path(value.resolve().anchor):
         raise click.BadParameter("the filesystem's root; expected a results folder")
     return value
+
+
+def _file_name(kind: str):
+    """The callback of an option naming a ``kind`` file to write (:func:`_output_path`); an existing
+    folder, device or pipe is refused (renaming a file onto it would replace it)."""
+
+    def check(ctx, param, text: str | None) -> Path | None:
+        if text is None:
+            return None
+        value = _output_path(text, f"a {kind} file name")
+        if value.exists() and not value.is_file():
+            raise click.BadParameter(
+                f"{shorten(value, 200, quote=False)} is not a regular file; expected a {kind} file name"
+            )
+        return value
+
+    return check
+
+
+class _ExistingPath(click.ParamType):
+    """An existing file (or folder) to read; its problems said in one short line."""
+
+    name = "path"
+
+    def __init__(self, folder: bool = False):
+        self.folder = folder
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, Path):
+            return value
+        path = Path(value)
+        problem = _path_problem(path)
+        if problem:
+            self.fail(problem, param, ctx)
+        if not path.exists():
+            self.fail(f"{shorten(value, 200, quote=False)}: no such {'folder' if self.folder else 'file'}", param, ctx)
+        if self.folder and not path.is_dir():
+            self.fail(f"{shorten(value, 200, quote=False)} is not a folder", param, ctx)
+        if not self.folder and path.is_dir():
+            self.fail(f"{shorten(value, 200, quote=False)} is a folder; expected a file", param, ctx)
+        return path
 
 
 def _space(scenario, jobs: int, max_compositions: int) -> int:
@@ -139,7 +220,7 @@ _max_compositions = click.option(
 )
 
 
-_existing_file = click.Path(exists=True, dir_okay=False, path_type=Path)
+_existing_file = _ExistingPath()
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -182,14 +263,10 @@ def enumerate_command(source: Path, count: bool, dof: int | None) -> None:
     default=None,
     help="Payload [kg]; default: the scenario's, or 0 for a catalogue.",
 )
-@click.option(
-    "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="URDF file to write."
-)
+@click.option("-o", "--output", type=str, callback=_file_name("URDF"), required=True, help="URDF file to write.")
 @_user_errors
 def urdf_command(composition: str, source: Path, payload: float | None, output: Path) -> None:
     """Write the URDF of COMPOSITION (e.g. B-J1-L2-E1), payload at tool0."""
-    if not str(output).strip() or output.is_dir():
-        raise click.BadParameter("expected a file name for the URDF", param_hint="-o/--output")
     if "+" in composition:
         raise click.BadParameter(
             f"{shorten(composition)}: a '+clear' or '+fastest' suffix names a candidate of `optimize`; "
@@ -224,7 +301,8 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 @click.option(
     "--out",
     "out",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=str,
+    callback=_file_name("JSON"),
     default=None,
     help="Write the verdict summary and the survivors with their boundary configurations as JSON.",
 )
@@ -236,10 +314,6 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None,
     settings = FeasibilitySettings(seeds=seeds)
     engine = make_engine(jobs)
     if out is not None:
-        if out.exists() and not out.is_file():  # a folder, or a device a rename would replace
-            raise click.BadParameter(
-                f"{shorten(out, 200, quote=False)} is not a regular file; expected a JSON file name", param_hint="--out"
-            )
         check_writable(out.parent)
     total = _space(scenario, engine.jobs, max_compositions)
     summary = FeasibilitySummary()
@@ -396,7 +470,7 @@ def run_command(
 
 
 @main.command("export")
-@click.argument("results", type=click.Path(exists=True, file_okay=False, path_type=Path), metavar="RESULTS_DIR")
+@click.argument("results", type=_ExistingPath(folder=True), metavar="RESULTS_DIR")
 @click.option("--rate", type=_Number(1.0, 1e5), default=1000.0, show_default=True, help="Controller rate [Hz].")
 @_user_errors
 def export_command(results: Path, rate: float) -> None:
@@ -407,7 +481,7 @@ def export_command(results: Path, rate: float) -> None:
 
 
 @main.command("view")
-@click.argument("results", type=click.Path(exists=True, file_okay=False, path_type=Path), metavar="RESULTS_DIR")
+@click.argument("results", type=_ExistingPath(folder=True), metavar="RESULTS_DIR")
 @click.option("--open", "open_page", is_flag=True, help="Open the page in the default browser.")
 @_user_errors
 def view_command(results: Path, open_page: bool) -> None:

@@ -302,6 +302,55 @@ def test_senseless_cli_values_are_refused(tmp_path, args, message):
     assert result.exit_code == 2 and message in result.output, result.output
 
 
+def test_output_paths_are_checked_before_any_work(tmp_path):
+    """A name that cannot be written (not UTF-8, too long, a loop of links) is refused before the
+    hours of work whose result it would lose, in one line that does not echo a huge path."""
+    os.symlink("loop", tmp_path / "loop")
+    loop = str(tmp_path / "loop")
+    deep = str(tmp_path / "/".join(["d" * 250] * 20))
+    cut = f"'{deep[:199]}... ({len(deep)} characters)"
+    too_long = f"{cut}: a path is at most 4095 bytes, this one has {len(deep)}"
+    cases = [
+        (
+            ["run", str(SMALL), "--out", str(tmp_path / "r\udcff")],
+            "'--out'",
+            f"'{tmp_path}/r\\udcff': expected a name in UTF-8 (it is written into the results), got the byte 0xff",
+        ),
+        (["optimize", "B-J1-L1-E1", "--scenario", str(SMALL), "--out", deep], "'--out'", too_long),
+        (["run", str(SMALL), "--out", loop], "'--out'", f"'{loop}': a loop of symbolic links"),
+        (["filter", str(SMALL), "--out", f"{loop}/v.json"], "'--out'", f"'{loop}/v.json': a loop of symbolic links"),
+        (["urdf", "B-J1-L1-E1", "--scenario", str(SMALL), "-o", deep], "'-o' / '--output'", too_long),
+        (
+            ["urdf", "B-J1-L1-E1", "--scenario", str(SMALL), "-o", "/dev/null"],
+            "'-o' / '--output'",
+            "/dev/null is not a regular file; expected a URDF file name",
+        ),
+    ]
+    for args, option, message in cases:
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+        assert result.output.splitlines()[-1] == f"Error: Invalid value for {option}: {message}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["loop"]
+
+
+def test_a_urdf_that_does_not_fit_is_not_left_cut_short(tmp_path):
+    """``urdf -o`` at a file-size limit: no truncated file, and the message names it."""
+    target = tmp_path / "x.urdf"
+
+    def limit_file_size():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
+
+    done = subprocess.run(
+        [*CLI, "urdf", "B-J1-L1-J1-L1-J1-L1-E2", "--scenario", str(SMALL), "-o", str(target)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=limit_file_size,
+    )
+    assert done.returncode == 1 and done.stderr == f"Error: {target}: File too large\n"
+    assert list(tmp_path.iterdir()) == []
+
+
 # -- 7. the CLI's last line is always a sentence ----------------------------------------------------
 def test_inputs_that_used_to_escape_as_tracebacks_end_in_one_line(tmp_path):
     png = tmp_path / "c.png"
