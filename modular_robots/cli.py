@@ -16,7 +16,7 @@ import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InfeasibleError, ModularRobotsError, Terminated, shorten
-from .execution import make_engine, terminations_raise
+from .execution import JOBS_PER_CORE, available_cores, make_engine, max_jobs, terminations_raise
 from .feasibility import (
     MAX_COMPOSITIONS,
     TEST_NAMES,
@@ -201,6 +201,36 @@ class _ExistingPath(click.ParamType):
         return path
 
 
+class _Jobs(click.ParamType):
+    """``--jobs``: 0 (every core) to :func:`~modular_robots.execution.max_jobs`."""
+
+    name = "integer"
+
+    def convert(self, value, param, ctx):
+        try:
+            jobs = int(value)
+        except (TypeError, ValueError):
+            self.fail(f"expected a whole number, got {shorten(value)}", param, ctx)
+        if not 0 <= jobs <= max_jobs():
+            self.fail(
+                f"expected 0 (every core) to {max_jobs()} ({JOBS_PER_CORE} per core: more workers only share the "
+                f"{available_cores()} core(s) and each needs its own memory), got {shorten(jobs)}",
+                param,
+                ctx,
+            )
+        return jobs
+
+
+_jobs = click.option(
+    "--jobs",
+    "-j",
+    type=_Jobs(),
+    default=0,
+    show_default="all cores",
+    help="Worker processes (1: run in this process).",
+)
+
+
 def _space(scenario, jobs: int, max_compositions: int) -> int:
     """Say how many compositions step B will check and about how long it takes (or refuse)."""
     total = composition_space(scenario.catalog, max_compositions, jobs)
@@ -283,14 +313,7 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 
 @main.command("filter")
 @click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
-@click.option(
-    "--jobs",
-    "-j",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default="all cores",
-    help="Worker processes (1: run in this process).",
-)
+@_jobs
 @click.option(
     "--seeds",
     type=click.IntRange(min=1, max=1000),
@@ -423,14 +446,7 @@ def optimize_command(
     default=None,
     help="Override the ratio rule's threshold.",
 )
-@click.option(
-    "--jobs",
-    "-j",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default="all cores",
-    help="Worker processes (1: run in this process).",
-)
+@_jobs
 @_max_compositions
 @_user_errors
 def run_command(

@@ -22,11 +22,14 @@ compute bit for bit the same.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import itertools
 import multiprocessing
 import os
 import signal
+import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -34,7 +37,7 @@ from typing import Any, Protocol, TypeVar
 
 from threadpoolctl import threadpool_limits
 
-from .exceptions import ModularRobotsError, Terminated
+from .exceptions import InputError, ModularRobotsError, Terminated, shorten
 
 __all__ = [
     "Engine",
@@ -42,6 +45,8 @@ __all__ = [
     "ProcessEngine",
     "make_engine",
     "available_cores",
+    "max_jobs",
+    "resolve_jobs",
     "Executor",
     "InProcessExecutor",
     "ProcessExecutor",
@@ -95,6 +100,34 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+#: At most this many workers per available core: more only share the cores, each holding its own
+#: models and solver (about 130 MB), and step B's estimate no longer holds.
+JOBS_PER_CORE = 4
+
+
+def max_jobs() -> int:
+    """The most workers a run may ask for (:data:`JOBS_PER_CORE` per available core)."""
+    return JOBS_PER_CORE * available_cores()
+
+
+def resolve_jobs(jobs: int | None = None) -> int:
+    """The number of workers for ``jobs``: ``None`` or 0 is every available core.
+
+    Raises
+    ------
+    InputError
+        For a negative number or more than :func:`max_jobs`.
+    """
+    if not jobs:
+        return available_cores()
+    if not 0 < jobs <= max_jobs():
+        raise InputError(
+            f"jobs: expected 0 (every core) to {max_jobs()} ({JOBS_PER_CORE} per available core: more workers "
+            f"only share the {available_cores()} core(s)), got {shorten(jobs)}"
+        )
+    return jobs
+
+
 # -- engines: map a function over a stream -------------------------------------------------------
 class Engine(Protocol):
     """Runs ``work(context, chunk)`` over chunks of ``items``; results come back in order."""
@@ -136,8 +169,33 @@ def _quiet_worker_signals() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _start_worker(context: Any) -> None:
+#: ``prctl``'s request to be sent a signal when the parent ends (Linux, ``<sys/prctl.h>``).
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent(parent: int) -> None:
+    """In a worker of the process ``parent``: end when the parent ends, however it ends (the OOM
+    killer's ``SIGKILL`` too), instead of waiting forever for work. On Linux the kernel sends the
+    worker ``SIGKILL`` when the thread that started it ends (``PR_SET_PDEATHSIG``); elsewhere a
+    thread checks every second that the parent is still there."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            if ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
+                if os.getppid() != parent:  # it ended before the request
+                    os._exit(1)
+                return
+    threading.Thread(target=_watch_parent, args=(parent,), name="watch-parent", daemon=True).start()
+
+
+def _watch_parent(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(1.0)
+    os._exit(1)
+
+
+def _start_worker(parent: int, context: Any) -> None:
     global _CONTEXT
+    _die_with_parent(parent)
     _CONTEXT = context
     _quiet_worker_signals()
     threadpool_limits(limits=1)
@@ -154,11 +212,11 @@ class ProcessEngine:
     """
 
     def __init__(self, jobs: int | None = None, window: int = 16):
-        self.jobs = jobs or available_cores()
+        self.jobs = resolve_jobs(jobs)
         self.window = window
 
     def map_chunks(self, work, context, items, chunksize=16):
-        with ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(context,)) as pool:
+        with ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(os.getpid(), context)) as pool:
             pending: deque = deque()
             try:
                 for chunk in _chunks(items, chunksize):
@@ -173,8 +231,9 @@ class ProcessEngine:
 
 
 def make_engine(jobs: int | None = None) -> Engine:
-    """``jobs`` = 1: :class:`SerialEngine`; ``None`` or 0: every available core."""
-    jobs = jobs or available_cores()
+    """``jobs`` = 1: :class:`SerialEngine`; ``None`` or 0: every available core
+    (:func:`resolve_jobs`)."""
+    jobs = resolve_jobs(jobs)
     return SerialEngine() if jobs == 1 else ProcessEngine(jobs)
 
 
@@ -244,7 +303,8 @@ class InProcessExecutor:
                 job.close()
 
 
-def _worker(conn, factory, context, specs, names) -> None:
+def _worker(parent, conn, factory, context, specs, names) -> None:
+    _die_with_parent(parent)
     _quiet_worker_signals()
     threadpool_limits(limits=1)
     executor = InProcessExecutor(factory, context, specs, names)
@@ -283,7 +343,7 @@ class ProcessExecutor:
             parent, child = ctx.Pipe()
             proc = ctx.Process(
                 target=_worker,
-                args=(child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
+                args=(os.getpid(), child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
                 daemon=True,
             )
             proc.start()
@@ -346,8 +406,9 @@ def make_executor(
     names: Sequence[str],
     jobs: int | None = None,
 ) -> Executor:
-    """``jobs`` = 1: :class:`InProcessExecutor`; ``None`` or 0: a worker process per core."""
-    jobs = jobs or available_cores()
+    """``jobs`` = 1: :class:`InProcessExecutor`; ``None`` or 0: a worker process per core
+    (:func:`resolve_jobs`)."""
+    jobs = resolve_jobs(jobs)
     if jobs == 1:
         return InProcessExecutor(factory, context, specs, names)
     return ProcessExecutor(factory, context, specs, names, jobs)

@@ -8,6 +8,7 @@ would meet it.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -27,6 +28,7 @@ from modular_robots import Composition, InputError, ScenarioError, SphereObstacl
 from modular_robots._yamlio import load_yaml
 from modular_robots.cli import main
 from modular_robots.collision import CULL_DISTANCE, CollisionModel, reach_bound
+from modular_robots.execution import available_cores, max_jobs
 from modular_robots.folder import LOCK, ResultsFolder
 from modular_robots.pipeline import run_scenario
 from modular_robots.recorder import previous_files
@@ -102,6 +104,68 @@ def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, s
     assert _leftovers(out) == []  # no lock, no temporary file
     time.sleep(0.2)
     assert _processes_of(out) == []  # no worker outlives the run
+
+
+_POOLS = """
+import sys, time
+from modular_robots.execution import ProcessEngine, make_executor
+
+
+def work(context, chunk):
+    time.sleep(600)
+
+
+class Sleeper:
+    result = None
+
+    def iterate(self):
+        time.sleep(600)
+        yield
+
+    def close(self):
+        pass
+
+
+if sys.argv[1] == "engine":
+    list(ProcessEngine(2).map_chunks(work, None, range(4), chunksize=1))
+else:
+    make_executor(lambda context, spec: Sleeper(), None, [0, 1], ["a", "b"], 2).advance(["a", "b"])
+"""
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, IndexError):
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("pool", ["engine", "executor"])
+def test_workers_end_when_their_parent_is_killed(tmp_path, pool):
+    """Step B's pool and step C's workers, their parent killed by the OOM killer (``SIGKILL``):
+    they end at once instead of waiting forever for work."""
+    script = tmp_path / "pools.py"
+    script.write_text(_POOLS)
+    parent = subprocess.Popen([sys.executable, str(script), pool])
+    deadline = time.monotonic() + 60
+    while len(workers := _children(parent.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert len(workers) == 2
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 10
+    while any(map(_alive, workers)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(map(_alive, workers))
 
 
 @pytest.mark.parametrize(
@@ -295,6 +359,12 @@ def test_a_space_too_large_for_step_b_is_refused_with_its_count_and_an_estimate(
         (["run", str(SMALL), "--out", ""], "expected a folder, got an empty name"),
         (["run", str(SMALL), "--out", "r/" + "x" * 300], "a file or folder name is at most 255 bytes"),
         (["export", ".", "--rate", "nan"], "expected a finite number, got nan"),
+        (
+            ["run", str(SMALL), "--jobs", "1" + "0" * 30],
+            f"expected 0 (every core) to {max_jobs()} (4 per core: more workers only share the "
+            f"{available_cores()} core(s) and each needs its own memory), got 1{'0' * 30}",
+        ),
+        (["filter", str(SMALL), "--jobs", str(max_jobs() + 1)], f"got {max_jobs() + 1}"),
     ],
 )
 def test_senseless_cli_values_are_refused(tmp_path, args, message):
