@@ -113,6 +113,91 @@ def test_malformed_yaml_names_the_line(tmp_path):
         load_catalog(path)
 
 
+def _digits(count: int) -> str:
+    """How a message shows a literal of ``count`` digits "1000…": cut, with its length."""
+    return f"1{'0' * 59}... ({count} characters)"
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "needle", "message"),
+    [
+        ("payload: 50.0", "payload: 1:30", "payload:", "task.payload: expected a number, got the string '1:30'"),
+        ("payload: 50.0", "payload: 1_0", "payload:", "task.payload: expected a number, got the string '1_0'"),
+        (
+            "payload: 50.0",
+            "payload: 2024-01-01",
+            "payload:",
+            "task.payload: expected a number, got the string '2024-01-01'",
+        ),
+        (
+            "payload: 50.0",
+            "payload: 1" + "0" * 5000,
+            "payload:",
+            f"task.payload: expected a number of magnitude at most 1e+09, got {_digits(5001)}",
+        ),
+        (
+            "nodes: 8",
+            "nodes: 1" + "0" * 5000,
+            "nodes:",
+            "optimizer.nodes: expected an integer <= 100 (the solver's matrices are dense: memory and time grow "
+            f"with the square of the problem's size), got {_digits(5001)}",
+        ),
+        (
+            "name: paper",
+            "name: paper\n? [a, b]\n: 1",
+            "? [a, b]",
+            "(top level): expected keys that are names, got a list as a key",
+        ),
+        (
+            "name: paper",
+            "name: paper\n{a: 1}: 2",
+            "{a: 1}",
+            "(top level): expected keys that are names, got a mapping as a key",
+        ),
+        (
+            "name: paper",
+            "name: paper\n7: x",
+            "7: x",
+            "(top level): expected keys that are names, got the number 7 as a key",
+        ),
+        ("name: paper", "name: paper\n~: x", "~: x", "(top level): expected keys that are names, got nothing as a key"),
+        (
+            "  rule: ratio",
+            "  rule: ratio\n  on: 1",
+            "  on: 1",
+            "pruning.on: unknown key (expected one of: admission, gate, lookahead, patience, reference, rule, "
+            "start_iteration, threshold, window)",
+        ),
+    ],
+    ids=[
+        "base-60",
+        "underscore",
+        "date",
+        "long-number",
+        "long-integer",
+        "list-key",
+        "mapping-key",
+        "number-key",
+        "null-key",
+        "yaml-1.1-boolean",
+    ],
+)
+def test_yaml_is_read_by_the_yaml_1_2_core_schema(tmp_path, old, new, needle, message):
+    """The docs promise YAML 1.2: what YAML 1.1 reads as base 60, octal, dates or booleans (and
+    Python cannot convert, or hash) is reported at its line and key like any other wrong value."""
+    path = _scenario(tmp_path, old, new)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert str(info.value) == f"{path}:{_line(path.read_text(), needle)}: {message}"
+
+
+@pytest.mark.parametrize(
+    ("text", "payload"), [("010", 10.0), ("0o10", 8.0), ("0x10", 16.0), ("1e1", 10.0), ("+.5", 0.5)]
+)
+def test_yaml_1_2_numbers(tmp_path, text, payload):
+    assert load_scenario(_scenario(tmp_path, "payload: 50.0", f"payload: {text}")).task.payload == payload
+
+
 def test_missing_file(tmp_path):
     with pytest.raises(CatalogError, match=r"nope.yaml: cannot read file: No such file or directory"):
         load_catalog(tmp_path / "nope.yaml")
