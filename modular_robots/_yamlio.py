@@ -225,7 +225,8 @@ class Fields:
             return self._prefix or "(top level)"
         if isinstance(key, int):
             return f"{self._prefix}[{key}]"
-        return f"{self._prefix}.{key}" if self._prefix else str(key)
+        name = shorten(key, quote=False)
+        return f"{self._prefix}.{name}" if self._prefix else name
 
     def line_of(self, key: str | None = None) -> int:
         if key is not None and key in self._data.key_lines:
@@ -255,7 +256,7 @@ class Fields:
         if not isinstance(value, str) or not value:
             raise self.fail(key, f"expected a non-empty string, got {_kind(value)}")
         if choices and value not in choices:
-            raise self.fail(key, f"expected one of {', '.join(choices)}; got {value!r}")
+            raise self.fail(key, f"expected one of {', '.join(choices)}; got {shorten(value)}")
         return value
 
     def number(

@@ -97,7 +97,7 @@ class Catalog:
             return self._by_id[module_id]
         except KeyError:
             raise CatalogError(
-                f"unknown module {shorten(module_id)} in catalogue {self.name!r} "
+                f"unknown module {shorten(module_id)} in catalogue {shorten(self.name)} "
                 f"(known: {', '.join(list(self._by_id)[:30])}{', ...' if len(self._by_id) > 30 else ''})"
             ) from None
 

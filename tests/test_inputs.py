@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from modular_robots import CatalogError, ScenarioError, load_catalog, load_scenario
+from modular_robots import CatalogError, Composition, CompositionError, ScenarioError, load_catalog, load_scenario
 
 from .conftest import PAPER_CATALOG, PAPER_SCENARIO
 
@@ -341,6 +341,37 @@ def test_catalogue_error_inside_a_scenario_names_the_catalogue(tmp_path):
         CatalogError, match=r"catalogs/paper.yaml:\d+: modules\[2\].mass: expected a number > 0, got -0.9$"
     ):
         load_scenario(path)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "start"),
+    [
+        ("cost: time", "cost: " + "x" * 30000, "task.cost: expected one of time, effort; got 'xxx"),
+        ("rule: ratio", "rule: " + "r" * 30000, "pruning.rule: expected one of ratio, paper, none; got 'rrr"),
+        ("name: paper", "name: paper\n? " + "k" * 30000 + "\n: 1", "kkk"),
+        ("name: paper", "name: paper\ncatalog_x: " + "v" * 30000, "catalog_x: unknown key"),
+    ],
+    ids=["choice", "rule", "unknown-key", "unknown-key-value"],
+)
+def test_messages_cut_the_values_they_echo(tmp_path, old, new, start):
+    path = _scenario(tmp_path, old, new)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    message = str(info.value).split(": ", 1)[1]
+    assert message.startswith(start) and len(message) < 300, message[:400]
+
+
+def test_a_huge_catalogue_name_is_cut_where_it_is_echoed(tmp_path):
+    path = _catalog(tmp_path, "name: paper", "name: " + "N" * 30000)
+    catalog = load_catalog(path)
+    cut = f"'{'N' * 59}... (30000 characters)"
+    with pytest.raises(CompositionError) as info:
+        Composition.from_name("B-J1-E1", catalog)
+    assert str(info.value) == (
+        f"composition 'B-J1-E1': 0 link(s) after a joint; the grammar allows 1 to 1 (catalogue {cut})"
+    )
+    with pytest.raises(CatalogError, match=re.escape(f"unknown module 'X9' in catalogue {cut} (known:")):
+        catalog.module("X9")
 
 
 def test_shipped_scenarios_load():

@@ -432,6 +432,10 @@ def test_inputs_that_used_to_escape_as_tracebacks_end_in_one_line(tmp_path):
         (["enumerate", str(png)], f"Error: {png}:1: expected UTF-8 text, got the byte 0x89 (is it a YAML file?)"),
         (["enumerate", str(two)], f"Error: {two}:2: expected one YAML document, found a second one here (after '---')"),
         (["urdf", huge, "--scenario", str(SMALL), "-o", str(tmp_path / "x.urdf")], "(30004 characters)"),
+        (
+            ["optimize", "B-J1-L1-E1+" + "c" * 30000, "--scenario", str(SMALL), "--out", str(tmp_path / "r")],
+            "... (30011 characters): the suffix after '+' must be one of fastest, clear",
+        ),
     ]
     for args, expected in cases:
         result = CliRunner().invoke(main, args)
