@@ -267,13 +267,15 @@ class Fields:
         minimum: float | None = None,
         exclusive_minimum: float | None = None,
         maximum: float | None = None,
+        why: str = "",
     ) -> float:
+        """A number in the bounds given; ``why`` says why the maximum (in the error)."""
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
             return value
         value = self._check_number(key, value, minimum, exclusive_minimum)
         if maximum is not None and value > maximum:
-            raise self.fail(key, f"expected a number <= {maximum:g}, got {value:g}")
+            raise self.fail(key, f"expected a number <= {maximum:g}{why and f' ({why})'}, got {value:g}")
         return value
 
     def integer(

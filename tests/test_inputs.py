@@ -77,6 +77,19 @@ def _line(text: str, needle: str) -> int:
             "modules[3].length",
             "expected a number <= 10, got 1e+09",
         ),
+        (
+            "twist_in_deg: 90",
+            "twist_in_deg: 1.0e9",
+            "modules[3].twist_in_deg",
+            "expected a number <= 360 (a twist is an angle in degrees; beyond a turn, it is a typo), got 1e+09",
+        ),
+        (
+            "id: L1\n",
+            "id: L" + "1" * 200 + "\n",
+            "modules[3].id",
+            "expected at most 100 letters, digits or '_' (an id is part of composition and URDF link names), "
+            f"got 'L{'1' * 58}... (201 characters)",
+        ),
     ],
     ids=[
         "unknown-key",
@@ -92,6 +105,8 @@ def _line(text: str, needle: str) -> int:
         "unphysical-inertia",
         "inertia-not-positive-definite",
         "absurd-length",
+        "absurd-twist",
+        "long-id",
     ],
 )
 def test_catalog_errors_name_file_line_key(tmp_path, old, new, key, message):
@@ -272,6 +287,13 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         ),
         ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 3, got 1"),
         (
+            "nodes: 8",
+            "nodes: 8\n  constraint_tolerance: 1.0e6",
+            "constraint_tolerance:",
+            "optimizer.constraint_tolerance: expected a number <= 0.01 (looser, the solver stops before the plan "
+            "keeps its constraints and margins), got 1e+06",
+        ),
+        (
             "threshold: 0.5",
             "threshold: half",
             "threshold:",
@@ -317,6 +339,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         "unknown-key",
         "self-collision",
         "too-few-nodes",
+        "loose-tolerance",
         "threshold-type",
         "unknown-rule",
         "negative-patience",
