@@ -40,13 +40,13 @@ __all__ = ["main"]
 def _user_errors(command):
     """End every failure with a one-line ``Error: …`` and a non-zero exit, never a traceback:
     package errors and failed file operations exit 1, an interruption 130 (Ctrl-C) or 128 + the
-    signal's number (``SIGTERM``, ``SIGHUP``); anything else is reported as unexpected (set
-    ``MODULAR_ROBOTS_DEBUG=1`` for its traceback)."""
+    signal's number (``SIGTERM``, ``SIGHUP``, …; the first signal decides, later ones are ignored);
+    anything else is reported as unexpected (set ``MODULAR_ROBOTS_DEBUG=1`` for its traceback)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         try:
-            with terminations_raise():
+            with terminations_raise(final=True):
                 return command(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise

@@ -64,32 +64,98 @@ def single_threaded_blas() -> contextlib.AbstractContextManager:
     return threadpool_limits(limits=1)
 
 
-#: The signals that end a run as an interruption: ``kill``/``timeout``/a batch scheduler, a closed terminal.
-TERMINATING = (signal.SIGTERM, signal.SIGHUP)
+#: The signals that end a run as an interruption, recorded: Ctrl-C, ``kill``/``timeout``/a batch
+#: scheduler, a closed terminal, Ctrl-\, the user signals, a CPU-time limit, an alarm. (``SIGKILL``
+#: and ``SIGSTOP`` cannot be caught; Python ignores ``SIGPIPE`` and ``SIGXFSZ``, so a write fails.)
+ENDING = (
+    signal.SIGINT,
+    signal.SIGTERM,
+    signal.SIGHUP,
+    signal.SIGQUIT,
+    signal.SIGUSR1,
+    signal.SIGUSR2,
+    signal.SIGXCPU,
+    signal.SIGALRM,
+)
+#: The first ending signal received within :func:`terminations_raise` (None: none yet), how many
+#: such blocks are open, and the read end of the pipe the signals are written to as they arrive.
+_ending: dict[str, int | None] = {"signum": None, "depth": 0, "arrivals": None}
 
 
 @contextlib.contextmanager
-def terminations_raise() -> Iterator[None]:
-    """Within the block, ``SIGTERM`` and ``SIGHUP`` raise :class:`~modular_robots.exceptions.Terminated`
-    in the main thread (where they would otherwise end the process on the spot), so that a run's
-    ``finally`` blocks and its record of the ending run as they do for Ctrl-C. Signals whose
-    handler the application set itself are left alone, and so is a block outside the main thread.
+def terminations_raise(final: bool = False) -> Iterator[None]:
+    """Within the block, the first of the :data:`ENDING` signals raises in the main thread
+    (where most would otherwise end the process on the spot): ``KeyboardInterrupt`` for Ctrl-C,
+    :class:`~modular_robots.exceptions.Terminated` for the others, so that a run's ``finally``
+    blocks and its record of the ending run. Every later one is ignored until the block ends: a
+    second Ctrl-C or a supervisor repeating ``SIGTERM`` would interrupt that record, and the first
+    signal decides how the run ends. Signals whose handler the application set itself are left
+    alone, and so is a block outside the main thread.
+
+    Parameters
+    ----------
+    final
+        The process ends after the block (the command line): once a signal has arrived, the
+        signals stay ignored after it too, while the process reports and exits.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {}
-    for signum in TERMINATING:
-        if signal.getsignal(signum) == signal.SIG_DFL:
-            previous[signum] = signal.signal(signum, _raise_terminated)
+    with contextlib.ExitStack() as outer:
+        if _ending["depth"] == 0:
+            _ending["signum"] = None
+            outer.enter_context(_arrivals())
+        _ending["depth"] += 1
+        previous = {}
+        for signum in ENDING:
+            if signal.getsignal(signum) in (signal.SIG_DFL, signal.default_int_handler):
+                previous[signum] = signal.signal(signum, _end_on_signal)
+        try:
+            yield
+        finally:
+            _ending["depth"] -= 1
+            ignore = final and _ending["signum"] is not None
+            for signum, handler in previous.items():
+                signal.signal(signum, signal.SIG_IGN if ignore else handler)
+
+
+@contextlib.contextmanager
+def _arrivals() -> Iterator[None]:
+    """Within the block, the signals are written to a pipe as they arrive (``set_wakeup_fd``), so
+    that the first can be told: Python runs the handlers of signals pending together in the order of
+    their numbers, not of their arrival (a ``SIGHUP`` 2 ms after a ``SIGTERM`` would be handled
+    first). Left alone if the application uses the wake-up file itself."""
+    read, write = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+    previous = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
+    if previous != -1:
+        signal.set_wakeup_fd(previous)
+    else:
+        _ending["arrivals"] = read
     try:
         yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        if _ending["arrivals"] == read:
+            signal.set_wakeup_fd(-1)
+            _ending["arrivals"] = None
+        os.close(read)
+        os.close(write)
 
 
-def _raise_terminated(signum, frame) -> None:
+def _first_arrived(signum: int) -> int:
+    """The ending signal that arrived first (:func:`_arrivals`), ``signum`` if it cannot be told."""
+    with contextlib.suppress(OSError, TypeError):
+        for byte in os.read(_ending["arrivals"], 4096):
+            if byte in ENDING:
+                return byte
+    return signum
+
+
+def _end_on_signal(signum, frame) -> None:
+    if _ending["signum"] is not None:  # the run is already ending: the first signal decides how
+        return
+    signum = _ending["signum"] = _first_arrived(signum)
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     raise Terminated(signum)
 
 
@@ -161,12 +227,11 @@ _CONTEXT: Any = None
 
 
 def _quiet_worker_signals() -> None:
-    """In a worker: the parent decides when to stop (Ctrl-C or a closed terminal reach the whole
-    process group), and ``SIGTERM`` (the parent's shutdown) ends the worker at once, silently,
-    instead of the parent's handler inherited through ``fork``."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGHUP, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    """In a worker: the parent decides when to stop (Ctrl-C, Ctrl-\\ or a closed terminal reach
+    the whole process group), and ``SIGTERM`` (the parent's shutdown) ends the worker at once,
+    silently, instead of the parent's handler inherited through ``fork``."""
+    for signum in ENDING:
+        signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM else signal.SIG_IGN)
 
 
 #: ``prctl``'s request to be sent a signal when the parent ends (Linux, ``<sys/prctl.h>``).

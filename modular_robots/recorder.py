@@ -156,8 +156,13 @@ class RunRecorder:
         """End the run with ``status`` (one of :data:`STATUSES`) and rewrite the document."""
         if status not in STATUSES[1:]:
             raise ValueError(f"a run ends as one of {STATUSES[1:]}, not {status!r}")
+        before = self.status, self.message
         self.status, self.message = status, message
-        self._write()
+        try:
+            self._write()
+        except BaseException:  # not written: a signal now still finds the run running, and records it
+            self.status, self.message = before
+            raise
 
     def _end(self, status: str, message: str) -> None:
         """:meth:`finish` while the block is left by an exception: if the document cannot be
@@ -166,7 +171,7 @@ class RunRecorder:
         try:
             self.finish(status, message)
         except OSError as exc:
-            self.message = f"{message}; result.json cut short: {_describe(exc)}"
+            self.status, self.message = status, f"{message}; result.json cut short: {_describe(exc)}"
             with contextlib.suppress(OSError):
                 _overwrite(self.path / RESULT, json.dumps(self.summary(), indent=1) + "\n")
 

@@ -18,6 +18,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ import pytest
 from click.testing import CliRunner
 
 from modular_robots import Composition, InputError, ScenarioError, SphereObstacle, load_scenario
+from modular_robots.__main__ import main as entry_point
 from modular_robots._yamlio import load_yaml
 from modular_robots.cli import main
 from modular_robots.collision import CULL_DISTANCE, CollisionModel, reach_bound
@@ -73,16 +75,15 @@ def _processes_of(out: Path) -> list[int]:
     return found
 
 
-# -- 1. every termination is recorded ------------------------------------------------------------
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
-def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, signum):
-    out = tmp_path / "out"
+def _run_until_step_c(out: Path, jobs: int, **popen) -> subprocess.Popen:
+    """``run`` of the small scenario into ``out``, once its step C has started."""
     child = subprocess.Popen(
-        [*CLI, "run", str(SMALL), "--jobs", "2", "--out", str(out)],
+        [*CLI, "run", str(SMALL), "--jobs", str(jobs), "--out", str(out)],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        **popen,
     )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and child.poll() is None:
@@ -92,6 +93,14 @@ def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, s
         except (OSError, ValueError):
             pass
         time.sleep(0.02)
+    return child
+
+
+# -- 1. every termination is recorded ------------------------------------------------------------
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT])
+def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, signum):
+    out = tmp_path / "out"
+    child = _run_until_step_c(out, jobs=2)
     child.send_signal(signum)
     _, stderr = child.communicate(timeout=60)
     name = signal.Signals(signum).name
@@ -104,6 +113,46 @@ def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, s
     assert _leftovers(out) == []  # no lock, no temporary file
     time.sleep(0.2)
     assert _processes_of(out) == []  # no worker outlives the run
+
+
+@pytest.mark.parametrize(
+    ("first", "then", "group", "jobs"),
+    [(signal.SIGINT, signal.SIGINT, True, 2), (signal.SIGTERM, signal.SIGHUP, False, 1)],
+    ids=["ctrl-c-hammered", "term-then-hup-every-2-ms"],
+)
+def test_signals_in_quick_succession_end_the_run_as_the_first_one_says(tmp_path, first, then, group, jobs):
+    """A second Ctrl-C, or a supervisor repeating its signal, must not interrupt the record of the
+    ending: every signal after the first is ignored, and the first names the ending everywhere."""
+    out = tmp_path / "out"
+    child = _run_until_step_c(out, jobs, start_new_session=group)
+    send = (lambda signum: os.killpg(child.pid, signum)) if group else child.send_signal
+    send(first)
+    deadline = time.monotonic() + 1.5
+    while child.poll() is None and time.monotonic() < deadline:
+        with contextlib.suppress(ProcessLookupError):
+            send(then)
+        time.sleep(0.002)
+    _, stderr = child.communicate(timeout=60)
+    said = "interrupted by the user" if first == signal.SIGINT else f"terminated by {signal.Signals(first).name}"
+    assert child.returncode == 128 + first, stderr
+    assert "Traceback" not in stderr and stderr.rstrip().splitlines()[-1] == f"Error: {said}"
+    document = _document(out)
+    assert document["status"] == "interrupted" and document["message"].startswith(said)
+    assert document["counts"]["candidates"] == len(document["candidates"]) == 6
+
+
+def test_ctrl_c_while_the_libraries_load_ends_in_one_line(monkeypatch, capsys):
+    """The command's entry point loads the command line (numpy, scipy, Pinocchio: seconds) where it
+    can catch Ctrl-C."""
+
+    class Loading(types.ModuleType):
+        def __getattr__(self, name):
+            raise KeyboardInterrupt
+
+    monkeypatch.setitem(sys.modules, "modular_robots.cli", Loading("modular_robots.cli"))
+    with pytest.raises(SystemExit) as info:
+        entry_point()
+    assert info.value.code == 130 and capsys.readouterr().err == "Error: interrupted by the user\n"
 
 
 _POOLS = """
