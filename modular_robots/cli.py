@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import json
 import math
 import os
+import signal
 import sys
 import time
 from dataclasses import replace
@@ -15,7 +17,7 @@ from pathlib import Path
 import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
-from .exceptions import InfeasibleError, ModularRobotsError, Terminated, shorten
+from .exceptions import InfeasibleError, InputError, ModularRobotsError, Terminated, shorten
 from .execution import JOBS_PER_CORE, available_cores, make_engine, max_jobs, terminations_raise
 from .feasibility import (
     MAX_COMPOSITIONS,
@@ -41,7 +43,8 @@ def _user_errors(command):
     """End every failure with a one-line ``Error: …`` and a non-zero exit, never a traceback:
     package errors and failed file operations exit 1, an interruption 130 (Ctrl-C) or 128 + the
     signal's number (``SIGTERM``, ``SIGHUP``, …; the first signal decides, later ones are ignored);
-    anything else is reported as unexpected (set ``MODULAR_ROBOTS_DEBUG=1`` for its traceback)."""
+    a reader that closed our output (``| head``) ends the command quietly; anything else is
+    reported as unexpected (set ``MODULAR_ROBOTS_DEBUG=1`` for its traceback)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
@@ -50,6 +53,8 @@ def _user_errors(command):
                 return command(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
+        except BrokenPipeError:
+            _reader_gone()
         except ModularRobotsError as exc:
             first, _, details = str(exc).partition("\n")
             if details:  # a diagnosis: its details first, the sentence last
@@ -75,6 +80,14 @@ def _user_errors(command):
 def _fail(message: str, code: int) -> None:
     click.echo(f"Error: {message}", err=True)
     sys.exit(code)
+
+
+def _reader_gone() -> None:
+    """Exit as a command killed by ``SIGPIPE`` would (141), without a word: the reader of our
+    output has gone (``enumerate | head``). Output still buffered goes nowhere."""
+    with contextlib.suppress(OSError, ValueError):
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    sys.exit(128 + signal.SIGPIPE)
 
 
 def _os_error(exc: OSError) -> str:
@@ -263,17 +276,25 @@ def main() -> None:
 @click.argument("source", type=_existing_file, metavar="SCENARIO_OR_CATALOG")
 @click.option("--count", is_flag=True, help="Print the number of compositions per DOF instead of their names.")
 @click.option("--dof", type=int, default=None, help="Only compositions with this many DOF.")
+@_max_compositions
 @_user_errors
-def enumerate_command(source: Path, count: bool, dof: int | None) -> None:
+def enumerate_command(source: Path, count: bool, dof: int | None, max_compositions: int) -> None:
     """Step A: list every composition the catalogue's grammar allows, one per line."""
     _, catalog = load_scenario_or_catalog(source)
+    counts = count_compositions(catalog, dof)
     if count:
-        counts = count_compositions(catalog, dof)
         click.echo("dof  compositions")
         for k, n in counts.items():
             click.echo(f"{k:<4d} {n}")
         click.echo(f"all  {sum(counts.values())}")
         return
+    total = sum(counts.values())
+    if total > max_compositions:
+        raise InputError(
+            f"the catalogue {shorten(catalog.name)} allows {total:,} compositions"
+            f"{f' of {dof} DOF' if dof is not None else ''}: too many to list. Count them (--count), choose "
+            f"a DOF (--dof) or raise the limit of {max_compositions:,} (--max-compositions)"
+        )
     for composition in enumerate_compositions(catalog, dof):
         click.echo(composition.name)
 
@@ -454,6 +475,8 @@ def run_command(
 ) -> None:
     """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
     scenario = with_pruning(load_scenario(scenario_path), rule, threshold)
+    if threshold is not None and scenario.pruning.rule == "none":
+        click.echo(f"warning: --threshold {threshold:g} has no effect: the rule none never prunes", err=True)
     out = out or Path("results") / scenario.name
     _space(scenario, make_engine(jobs).jobs, max_compositions)
     click.echo(

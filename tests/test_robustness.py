@@ -493,6 +493,37 @@ def test_inputs_that_used_to_escape_as_tracebacks_end_in_one_line(tmp_path):
         assert len(result.output) < 600
 
 
+def test_enumerate_refuses_to_list_more_than_run_would_check(tmp_path):
+    catalog = tmp_path / "c.yaml"
+    catalog.write_text((ROOT / "scenarios" / "catalogs" / "paper-4dof.yaml").read_text().replace("[2, 4]", "[2, 12]"))
+    result = CliRunner().invoke(main, ["enumerate", str(catalog)])
+    assert result.exit_code == 1
+    assert result.output == (
+        "Error: the catalogue 'paper-4dof' allows 870,712,932 compositions: too many to list. Count them (--count), "
+        "choose a DOF (--dof) or raise the limit of 1,000,000 (--max-compositions)\n"
+    )
+    assert CliRunner().invoke(main, ["enumerate", str(catalog), "--dof", "2"]).output.count("\n") == 12
+
+
+def test_enumerate_into_a_closed_pipe_ends_quietly():
+    """``enumerate | head``: the reader has gone; no error, the exit status of ``SIGPIPE``."""
+    child = subprocess.Popen(
+        [*CLI, "enumerate", str(ROOT / "scenarios" / "catalogs" / "paper.yaml")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert child.stdout.readline() == b"B-J1-L1-E1\n"
+    child.stdout.close()
+    assert child.wait(timeout=60) == 128 + signal.SIGPIPE and child.stderr.read() == b""
+
+
+def test_a_threshold_the_rule_does_not_use_is_warned_about(tmp_path):
+    infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
+    args = ["run", str(infeasible), "--jobs", "1", "--out", str(tmp_path / "r"), "--rule", "none", "--threshold", "0.1"]
+    result = CliRunner().invoke(main, args)
+    assert "warning: --threshold 0.1 has no effect: the rule none never prunes\n" in result.output
+
+
 def test_yaml_merge_keys_may_override_and_own_duplicates_may_not(tmp_path):
     path = tmp_path / "m.yaml"
     path.write_text("base: &d {x: 1, y: 2}\nthis:\n  <<: *d\n  y: 3\n")
