@@ -149,10 +149,10 @@ class ResultsFolder:
         return False
 
     def remove(self, names: Iterable[str]) -> None:
-        """Remove the files ``names`` of this folder if they exist (never the lock)."""
+        """Remove the files ``names`` of this folder if they exist (never the lock, nor a folder)."""
         for name in names:
             if name != LOCK:
-                with contextlib.suppress(FileNotFoundError):
+                with contextlib.suppress(FileNotFoundError, IsADirectoryError):
                     (self.path / name).unlink()
 
 

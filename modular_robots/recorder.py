@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .collision import Approach
-from .exceptions import Terminated
+from .exceptions import ResultsFolderError, Terminated, shorten
 from .execution import terminations_raise
 from .folder import ResultsFolder, atomic_write
 from .ocp.candidate import CandidateResult
@@ -86,6 +86,7 @@ class RunRecorder:
             if self._folder is not None:
                 stack.enter_context(self._folder)
                 self._folder.remove(previous_files(self.path))
+                _check_replaceable(self.path)
             stack.enter_context(terminations_raise())
             self._write()
             self._exits = stack.pop_all()
@@ -242,6 +243,18 @@ def previous_files(folder: Path) -> list[str]:
         with contextlib.suppress(OSError):
             names += sorted(p.name for p in folder.iterdir() if is_export(p.name))
     return names
+
+
+def _check_replaceable(folder: Path) -> None:
+    """Refuse, before any work, a folder where a file the run writes could not be renamed into
+    place: a folder, device or pipe of that name (the run would fail only at its end)."""
+    for name in (RESULT, *WINNER_FILES, VIEWER):
+        path = folder / name
+        if path.exists() and not path.is_file():
+            raise ResultsFolderError(
+                f"{shorten(path, 200, quote=False)}: expected a file a run may replace (or nothing), got a folder, "
+                "device or pipe; remove it or choose another folder (--out)"
+            )
 
 
 def _identities(folder: Path, names) -> dict[str, tuple[int, int] | None]:

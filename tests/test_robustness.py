@@ -331,6 +331,18 @@ def test_a_planted_lock_file_is_refused_and_what_it_points_to_is_untouched(tmp_p
     assert victim.read_text() == "precious\n" and sorted(p.name for p in out.iterdir()) == [LOCK]
 
 
+def test_a_folder_where_a_winner_file_cannot_go_is_refused_before_any_work(tmp_path):
+    out = tmp_path / "out"
+    (out / "winner.urdf").mkdir(parents=True)
+    result = CliRunner().invoke(main, ["run", str(SMALL), "--jobs", "1", "--out", str(out)])
+    assert result.exit_code == 1 and "step" not in result.output.splitlines()[-1]
+    assert result.output.splitlines()[-1] == (
+        f"Error: {out}/winner.urdf: expected a file a run may replace (or nothing), got a folder, device or pipe; "
+        "remove it or choose another folder (--out)"
+    )
+    assert sorted(p.name for p in out.iterdir()) == ["winner.urdf"]
+
+
 def test_a_forged_result_json_cannot_name_the_lock_or_a_users_file(tmp_path):
     (tmp_path / "result.json").write_text(
         json.dumps({"status": "done", "settings": {}, "winner": {"files": {"a": ".lock", "b": "keep.txt"}}})
