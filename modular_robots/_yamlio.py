@@ -89,6 +89,7 @@ for _tag, _pattern, _first in _CORE_SCHEMA:
 
 
 def _construct_int(loader: _LineLoader, node: yaml.ScalarNode) -> int | _LongNumber:
+    """A YAML 1.2 integer: decimal (leading zeros and all), ``0o`` octal or ``0x`` hexadecimal."""
     text = loader.construct_scalar(node)
     if not _INTEGER.fullmatch(text):  # an explicit ``!!int`` on other text
         raise yaml.constructor.ConstructorError(
@@ -101,6 +102,7 @@ def _construct_int(loader: _LineLoader, node: yaml.ScalarNode) -> int | _LongNum
 
 
 def _construct_float(loader: _LineLoader, node: yaml.ScalarNode) -> float:
+    """A YAML 1.2 float, ``.inf`` and ``.nan`` included (no base 60, no underscores)."""
     text = loader.construct_scalar(node)
     special = {".inf": math.inf, "+.inf": math.inf, "-.inf": -math.inf, ".nan": math.nan}.get(text.lower())
     if special is not None:
@@ -386,4 +388,5 @@ class Fields:
 
 
 def _long(value: _LongNumber) -> str:
+    """A too long number as a message shows it: cut, with its length."""
     return shorten(value.text, quote=False)

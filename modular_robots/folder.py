@@ -132,7 +132,12 @@ class ResultsFolder:
         if self.create:
             self.path.mkdir(parents=True, exist_ok=True)
         elif not self.path.is_dir():
-            raise OSError(errno.ENOTDIR if self.path.exists() else errno.ENOENT, "no such folder", str(self.path))
+            missing = not self.path.exists()
+            raise OSError(
+                errno.ENOENT if missing else errno.ENOTDIR,
+                "no such folder" if missing else "not a folder",
+                str(self.path),
+            )
         self._fd = _lock(self.path / LOCK, self.busy_hint)
         for leftover in self.path.iterdir():  # a crashed writer's, never a live one's: we hold the lock
             if is_temporary(leftover.name):

@@ -135,7 +135,7 @@ class Trajectory:
             row = 2 if table[0, 0] != 0.0 else int(np.argmax(steps <= 0.0)) + 3
             raise ValueError(f"{path}:{row}: column t: expected times from 0 that increase row by row")
         blocks = [table[:, 1 + k * nv : 1 + (k + 1) * nv] for k in range(4)]
-        _check_contract(path, header, table[:, 0], *blocks[:3])
+        _check_contract(path, table[:, 0], *blocks[:3])
         return cls(table[:, 0], *blocks, table[:, -3:])
 
     @staticmethod
@@ -152,7 +152,7 @@ class Trajectory:
         return self.q[i] + self.qd[i] * s + 0.5 * qdd * s * s, self.qd[i] + qdd * s, qdd
 
 
-def _check_contract(path, header: list[str], t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+def _check_contract(path, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
     """Raise ``ValueError`` naming the first row of the file ``path`` whose ``q`` or ``qd`` do not
     follow from the row before under the acceleration contract (beyond rounding)."""
     h = np.diff(t)[:, None]
