@@ -78,8 +78,9 @@ ENDING = (
     signal.SIGALRM,
 )
 #: The first ending signal received within :func:`terminations_raise` (None: none yet), how many
-#: such blocks are open, and the read end of the pipe the signals are written to as they arrive.
-_ending: dict[str, int | None] = {"signum": None, "depth": 0, "arrivals": None}
+#: such blocks are open, the read end of the pipe the signals are written to as they arrive, and
+#: the process that set the handlers (a worker forked from it inherits them for a moment).
+_ending: dict[str, int | None] = {"signum": None, "depth": 0, "arrivals": None, "pid": None}
 
 
 @contextlib.contextmanager
@@ -103,7 +104,7 @@ def terminations_raise(final: bool = False) -> Iterator[None]:
         return
     with contextlib.ExitStack() as outer:
         if _ending["depth"] == 0:
-            _ending["signum"] = None
+            _ending["signum"], _ending["pid"] = None, os.getpid()
             outer.enter_context(_arrivals())
         _ending["depth"] += 1
         previous = {}
@@ -121,10 +122,12 @@ def terminations_raise(final: bool = False) -> Iterator[None]:
 
 @contextlib.contextmanager
 def _arrivals() -> Iterator[None]:
-    """Within the block, the signals are written to a pipe as they arrive (``set_wakeup_fd``), so
-    that the first can be told: Python runs the handlers of signals pending together in the order of
-    their numbers, not of their arrival (a ``SIGHUP`` 2 ms after a ``SIGTERM`` would be handled
-    first). Left alone if the application uses the wake-up file itself."""
+    """Within the block, the signals are written to a pipe as the process receives them
+    (``set_wakeup_fd``), so that the first can be told: Python runs the handlers of signals
+    pending together in the order of their numbers, not of their arrival (a ``SIGHUP`` 2 ms after a
+    ``SIGTERM``, while the main thread is in a long solver call, would be handled first). (Signals
+    sent while the process is not running reach it in the order of their numbers: no process can
+    tell them apart.) Left alone if the application uses the wake-up file itself."""
     read, write = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
     previous = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
     if previous != -1:
@@ -151,6 +154,11 @@ def _first_arrived(signum: int) -> int:
 
 
 def _end_on_signal(signum, frame) -> None:
+    if os.getpid() != _ending["pid"]:  # a worker not yet quiet (_quiet_worker_signals): the parent decides
+        if signum == signal.SIGTERM:  # but its shutdown ends the worker, as in a quiet one
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+        return
     if _ending["signum"] is not None:  # the run is already ending: the first signal decides how
         return
     signum = _ending["signum"] = _first_arrived(signum)
@@ -229,7 +237,10 @@ _CONTEXT: Any = None
 def _quiet_worker_signals() -> None:
     """In a worker: the parent decides when to stop (Ctrl-C, Ctrl-\\ or a closed terminal reach
     the whole process group), and ``SIGTERM`` (the parent's shutdown) ends the worker at once,
-    silently, instead of the parent's handler inherited through ``fork``."""
+    silently, instead of the parent's handler inherited through ``fork`` (nor does it write to the
+    parent's wake-up pipe)."""
+    with contextlib.suppress(ValueError):  # not in the main thread: no wake-up file to reset
+        signal.set_wakeup_fd(-1)
     for signum in ENDING:
         signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM else signal.SIG_IGN)
 

@@ -127,6 +127,7 @@ def test_signals_in_quick_succession_end_the_run_as_the_first_one_says(tmp_path,
     child = _run_until_step_c(out, jobs, start_new_session=group)
     send = (lambda signum: os.killpg(child.pid, signum)) if group else child.send_signal
     send(first)
+    _wait_until_delivered(child.pid, first)  # pending together, the kernel delivers the lower number first
     deadline = time.monotonic() + 1.5
     while child.poll() is None and time.monotonic() < deadline:
         with contextlib.suppress(ProcessLookupError):
@@ -139,6 +140,18 @@ def test_signals_in_quick_succession_end_the_run_as_the_first_one_says(tmp_path,
     document = _document(out)
     assert document["status"] == "interrupted" and document["message"].startswith(said)
     assert document["counts"]["candidates"] == len(document["candidates"]) == 6
+
+
+def _wait_until_delivered(pid: int, signum: int) -> None:
+    """Wait until the process ``pid`` no longer has ``signum`` pending (its handler has it)."""
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        with contextlib.suppress(OSError, StopIteration):
+            status = Path(f"/proc/{pid}/status").read_text().splitlines()
+            pending = next(int(line.split()[1], 16) for line in status if line.startswith("ShdPnd:"))
+            if not pending >> (signum - 1) & 1:
+                return
+        time.sleep(0.001)
 
 
 def test_ctrl_c_while_the_libraries_load_ends_in_one_line(monkeypatch, capsys):
