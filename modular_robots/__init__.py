@@ -11,55 +11,60 @@ chains them all, :mod:`~modular_robots.execution` decides where work runs and
 radians throughout.
 """
 
+import importlib
 import logging
+from typing import TYPE_CHECKING
 
-from .catalog import Catalog, Grammar, JointLimits, Module, load_catalog
-from .collision import Approach, CollisionModel, Distances, closest_approach
-from .composition import Composition, count_compositions, enumerate_compositions
-from .exceptions import (
-    CatalogError,
-    CompositionError,
-    InfeasibleError,
-    InputError,
-    ModularRobotsError,
-    ScenarioError,
-    Terminated,
-)
-from .execution import InProcessExecutor, ProcessEngine, ProcessExecutor, SerialEngine, make_engine, make_executor
-from .feasibility import (
-    FeasibilitySettings,
-    FeasibilitySummary,
-    Verdict,
-    check_composition,
-    composition_space,
-    filter_compositions,
-)
-from .folder import FolderBusyError, ResultsFolder
-from .ocp import (
-    BoundaryPair,
-    Candidate,
-    CandidateResult,
-    CandidateSpec,
-    CandidateStatus,
-    Iterate,
-    ShootingProblem,
-    ShootingSolver,
-    SolverOutcome,
-    Trajectory,
-    Verification,
-    composition_problem,
-    make_candidate,
-    sample_trajectory,
-    verify,
-)
-from .pipeline import RunResult, candidate_specs, optimize_composition, run_scenario
-from .pruning import PruningManager, RoundCosts, ratio_rule
-from .recorder import RunRecorder
-from .report import export_controller_rate, read_winner
-from .robot import Primitive, RobotModel, robot_model
-from .scenario import OptimizerSettings, PruningSettings, Scenario, SphereObstacle, Task, load_scenario
-from .urdf import composition_urdf, write_urdf
-from .viewer import write_viewer
+if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers and IDEs
+    from .catalog import Catalog, Grammar, JointLimits, Module, load_catalog
+    from .collision import Approach, CollisionModel, Distances, closest_approach
+    from .composition import Composition, count_compositions, enumerate_compositions
+    from .exceptions import (
+        CatalogError,
+        CompositionError,
+        FolderBusyError,
+        InfeasibleError,
+        InputError,
+        ModularRobotsError,
+        ResultsFolderError,
+        ScenarioError,
+        Terminated,
+    )
+    from .execution import InProcessExecutor, ProcessEngine, ProcessExecutor, SerialEngine, make_engine, make_executor
+    from .feasibility import (
+        FeasibilitySettings,
+        FeasibilitySummary,
+        Verdict,
+        check_composition,
+        composition_space,
+        filter_compositions,
+    )
+    from .folder import ResultsFolder
+    from .ocp import (
+        BoundaryPair,
+        Candidate,
+        CandidateResult,
+        CandidateSpec,
+        CandidateStatus,
+        Iterate,
+        ShootingProblem,
+        ShootingSolver,
+        SolverOutcome,
+        Trajectory,
+        Verification,
+        composition_problem,
+        make_candidate,
+        sample_trajectory,
+        verify,
+    )
+    from .pipeline import RunResult, candidate_specs, optimize_composition, run_scenario
+    from .pruning import PruningManager, RoundCosts, ratio_rule
+    from .recorder import RunRecorder
+    from .report import export_controller_rate, read_winner
+    from .robot import Primitive, RobotModel, robot_model
+    from .scenario import OptimizerSettings, PruningSettings, Scenario, SphereObstacle, Task, load_scenario
+    from .urdf import composition_urdf, write_urdf
+    from .viewer import write_viewer
 
 __version__ = "0.1.0"
 
@@ -77,6 +82,7 @@ __all__ = [
     "CompositionError",
     "Distances",
     "FolderBusyError",
+    "ResultsFolderError",
     "ResultsFolder",
     "Terminated",
     "FeasibilitySettings",
@@ -135,5 +141,95 @@ __all__ = [
     "verify",
     "write_urdf",
 ]
+
+#: Each public name and the module that defines it, imported on first use (PEP 562): the command
+#: line starts, and catches Ctrl-C, before the numerical libraries load.
+_PUBLIC = {
+    "Approach": "collision",
+    "BoundaryPair": "ocp",
+    "Candidate": "ocp",
+    "CandidateResult": "ocp",
+    "CandidateSpec": "ocp",
+    "CandidateStatus": "ocp",
+    "Catalog": "catalog",
+    "CatalogError": "exceptions",
+    "CollisionModel": "collision",
+    "Composition": "composition",
+    "CompositionError": "exceptions",
+    "Distances": "collision",
+    "FolderBusyError": "exceptions",
+    "ResultsFolderError": "exceptions",
+    "ResultsFolder": "folder",
+    "Terminated": "exceptions",
+    "FeasibilitySettings": "feasibility",
+    "FeasibilitySummary": "feasibility",
+    "Grammar": "catalog",
+    "InProcessExecutor": "execution",
+    "InfeasibleError": "exceptions",
+    "InputError": "exceptions",
+    "Iterate": "ocp",
+    "JointLimits": "catalog",
+    "ModularRobotsError": "exceptions",
+    "Module": "catalog",
+    "OptimizerSettings": "scenario",
+    "Primitive": "robot",
+    "ProcessEngine": "execution",
+    "ProcessExecutor": "execution",
+    "PruningManager": "pruning",
+    "PruningSettings": "scenario",
+    "RobotModel": "robot",
+    "RoundCosts": "pruning",
+    "RunRecorder": "recorder",
+    "RunResult": "pipeline",
+    "Scenario": "scenario",
+    "ScenarioError": "exceptions",
+    "SerialEngine": "execution",
+    "ShootingProblem": "ocp",
+    "ShootingSolver": "ocp",
+    "SolverOutcome": "ocp",
+    "SphereObstacle": "scenario",
+    "Task": "scenario",
+    "Trajectory": "ocp",
+    "Verdict": "feasibility",
+    "Verification": "ocp",
+    "candidate_specs": "pipeline",
+    "check_composition": "feasibility",
+    "closest_approach": "collision",
+    "composition_space": "feasibility",
+    "export_controller_rate": "report",
+    "read_winner": "report",
+    "write_viewer": "viewer",
+    "composition_problem": "ocp",
+    "composition_urdf": "urdf",
+    "count_compositions": "composition",
+    "enumerate_compositions": "composition",
+    "filter_compositions": "feasibility",
+    "load_catalog": "catalog",
+    "load_scenario": "scenario",
+    "make_candidate": "ocp",
+    "make_engine": "execution",
+    "make_executor": "execution",
+    "optimize_composition": "pipeline",
+    "ratio_rule": "pruning",
+    "robot_model": "robot",
+    "run_scenario": "pipeline",
+    "sample_trajectory": "ocp",
+    "verify": "ocp",
+    "write_urdf": "urdf",
+}
+
+
+def __getattr__(name: str):
+    module = _PUBLIC.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_PUBLIC})
+
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

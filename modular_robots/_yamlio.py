@@ -37,8 +37,84 @@ class _Seq(list):
     item_lines: list[int]
 
 
+class _LongNumber:
+    """A number written with more than :data:`MAX_DIGITS` digits: more than any value of a
+    scenario or catalogue may have (and Python converts at most 4300), kept as its text so that
+    the key that holds it reports it."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __repr__(self) -> str:
+        return self.text
+
+
+class _NodeKey:
+    """A list or mapping used as a key (allowed by YAML, unhashable in Python): kept as what it
+    was, so that the mapping reports it as a key that is not a name."""
+
+    def __init__(self, kind: str):
+        self.kind = kind
+
+    def __repr__(self) -> str:
+        return self.kind
+
+
+#: The most digits of an integer literal read as a number (see :class:`_LongNumber`).
+MAX_DIGITS = 100
+
+#: YAML 1.2's core schema, which the docs promise, instead of PyYAML's YAML 1.1: ``010`` is ten
+#: (not octal eight), ``1e6`` a number; ``1:30`` (base 60), ``1_0``, ``on``, ``yes`` and
+#: ``2024-01-01`` are strings. Per tag: the pattern and the characters a match may start with.
+_CORE_SCHEMA = (
+    ("tag:yaml.org,2002:bool", r"true|True|TRUE|false|False|FALSE", "tTfF"),
+    ("tag:yaml.org,2002:int", r"[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+", "-+0123456789"),
+    (
+        "tag:yaml.org,2002:float",
+        r"[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN)",
+        "-+0123456789.",
+    ),
+    ("tag:yaml.org,2002:null", r"~|null|Null|NULL|", ["~", "n", "N", ""]),
+    ("tag:yaml.org,2002:merge", r"<<", "<"),
+)
+_INTEGER = re.compile(_CORE_SCHEMA[1][1])
+
+
 class _LineLoader(yaml.SafeLoader):
-    pass
+    yaml_implicit_resolvers: dict = {}  # noqa: RUF012 (PyYAML's class-level table, filled below)
+
+
+for _tag, _pattern, _first in _CORE_SCHEMA:
+    _LineLoader.add_implicit_resolver(_tag, re.compile(f"^(?:{_pattern})$"), list(_first))
+
+
+def _construct_int(loader: _LineLoader, node: yaml.ScalarNode) -> int | _LongNumber:
+    """A YAML 1.2 integer: decimal (leading zeros and all), ``0o`` octal or ``0x`` hexadecimal."""
+    text = loader.construct_scalar(node)
+    if not _INTEGER.fullmatch(text):  # an explicit ``!!int`` on other text
+        raise yaml.constructor.ConstructorError(
+            None, None, f"expected an integer, got {shorten(text)}", node.start_mark
+        )
+    if len(text) > MAX_DIGITS:
+        return _LongNumber(text)
+    base = {"0o": 8, "0x": 16}.get(text[:2], 10)
+    return int(text[2:] if base != 10 else text, base)
+
+
+def _construct_float(loader: _LineLoader, node: yaml.ScalarNode) -> float:
+    """A YAML 1.2 float, ``.inf`` and ``.nan`` included (no base 60, no underscores)."""
+    text = loader.construct_scalar(node)
+    special = {".inf": math.inf, "+.inf": math.inf, "-.inf": -math.inf, ".nan": math.nan}.get(text.lower())
+    if special is not None:
+        return special
+    if "_" in text:  # Python's float() would read 1_0 as 10
+        raise yaml.constructor.ConstructorError(None, None, f"expected a number, got {shorten(text)}", node.start_mark)
+    try:
+        return float(text)
+    except ValueError:
+        raise yaml.constructor.ConstructorError(
+            None, None, f"expected a number, got {shorten(text)}", node.start_mark
+        ) from None
 
 
 def _construct_map(loader: _LineLoader, node: yaml.MappingNode) -> _Map:
@@ -49,9 +125,12 @@ def _construct_map(loader: _LineLoader, node: yaml.MappingNode) -> _Map:
     loader.flatten_mapping(node)  # merged pairs first, then the mapping's own: own keys override
     merged = len(node.value) - own
     for index, (key_node, value_node) in enumerate(node.value):
-        key = loader.construct_object(key_node, deep=True)
+        if isinstance(key_node, yaml.ScalarNode):
+            key = loader.construct_object(key_node, deep=True)
+        else:
+            key = _NodeKey("a list" if isinstance(key_node, yaml.SequenceNode) else "a mapping")
         if index >= merged and key in out and out.key_lines[key] > 0:
-            raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r}", key_node.start_mark)
+            raise yaml.constructor.ConstructorError(None, None, f"duplicate key {shorten(key)}", key_node.start_mark)
         out[key] = loader.construct_object(value_node, deep=True)
         out.key_lines[key] = key_node.start_mark.line + 1 if index >= merged else -(key_node.start_mark.line + 1)
     out.key_lines = {k: abs(v) for k, v in out.key_lines.items()}
@@ -67,12 +146,8 @@ def _construct_seq(loader: _LineLoader, node: yaml.SequenceNode) -> _Seq:
 
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
-# YAML 1.2 numbers: ``1e6`` and ``1.0e6`` are floats (YAML 1.1, PyYAML's default, reads them as strings)
-_LineLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
-)
+_LineLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+_LineLoader.add_constructor("tag:yaml.org,2002:float", _construct_float)
 
 
 def load_yaml(path: Path, error: type[InputError]) -> Fields:
@@ -112,6 +187,10 @@ def load_yaml(path: Path, error: type[InputError]) -> Fields:
 def _kind(value: Any) -> str:
     if value is None:
         return "nothing"
+    if isinstance(value, _LongNumber):
+        return f"a number of {len(value.text)} characters"
+    if isinstance(value, _NodeKey):
+        return value.kind
     if isinstance(value, bool):
         return f"a boolean ({value})"
     if isinstance(value, (int, float)):
@@ -148,7 +227,8 @@ class Fields:
             return self._prefix or "(top level)"
         if isinstance(key, int):
             return f"{self._prefix}[{key}]"
-        return f"{self._prefix}.{key}" if self._prefix else str(key)
+        name = shorten(key, quote=False)
+        return f"{self._prefix}.{name}" if self._prefix else name
 
     def line_of(self, key: str | None = None) -> int:
         if key is not None and key in self._data.key_lines:
@@ -178,7 +258,7 @@ class Fields:
         if not isinstance(value, str) or not value:
             raise self.fail(key, f"expected a non-empty string, got {_kind(value)}")
         if choices and value not in choices:
-            raise self.fail(key, f"expected one of {', '.join(choices)}; got {value!r}")
+            raise self.fail(key, f"expected one of {', '.join(choices)}; got {shorten(value)}")
         return value
 
     def number(
@@ -189,13 +269,15 @@ class Fields:
         minimum: float | None = None,
         exclusive_minimum: float | None = None,
         maximum: float | None = None,
+        why: str = "",
     ) -> float:
+        """A number in the bounds given; ``why`` says why the maximum (in the error)."""
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
             return value
         value = self._check_number(key, value, minimum, exclusive_minimum)
         if maximum is not None and value > maximum:
-            raise self.fail(key, f"expected a number <= {maximum:g}, got {value:g}")
+            raise self.fail(key, f"expected a number <= {maximum:g}{why and f' ({why})'}, got {value:g}")
         return value
 
     def integer(
@@ -211,6 +293,9 @@ class Fields:
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
             return value
+        if isinstance(value, _LongNumber):
+            bound = maximum if maximum is not None else f"{MAX_MAGNITUDE:g}"
+            raise self.fail(key, f"expected an integer <= {bound}{why and f' ({why})'}, got {_long(value)}")
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.fail(key, f"expected an integer, got {_kind(value)}")
         if minimum is not None and value < minimum:
@@ -265,8 +350,14 @@ class Fields:
             yield Fields(item, self.path, f"{self.key_path(key)}[{i}]", self._error)
 
     def done(self) -> None:
-        """Raise for the first key that no getter read (an unknown or misspelt key)."""
+        """Raise for the first key that no getter read (an unknown or misspelt key, or a key that
+        is not a name: a number, a boolean, nothing, a list or a mapping)."""
         for key in self._data:
+            if not isinstance(key, str):
+                line = self._data.key_lines.get(key, self._data.line)
+                raise self._error(
+                    f"{self.path}:{line}: {self.key_path()}: expected keys that are names, got {_kind(key)} as a key"
+                )
             if key not in self._read:
                 expected = ", ".join(sorted(str(k) for k in self._read))
                 raise self.fail(key, f"unknown key (expected one of: {expected})")
@@ -276,6 +367,8 @@ class Fields:
             raise self.fail(key, message)
 
     def _check_number(self, key, value, minimum, exclusive_minimum, what: str = "") -> float:
+        if isinstance(value, _LongNumber):
+            raise self.fail(key, f"{what}expected a number of magnitude at most {MAX_MAGNITUDE:g}, got {_long(value)}")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(key, f"{what}expected a number, got {_kind(value)}")
         if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:  # before float(), which may overflow
@@ -292,3 +385,8 @@ class Fields:
         if exclusive_minimum is not None and value <= exclusive_minimum:
             raise self.fail(key, f"{what}expected a number > {exclusive_minimum:g}, got {value:g}")
         return value
+
+
+def _long(value: _LongNumber) -> str:
+    """A too long number as a message shows it: cut, with its length."""
+    return shorten(value.text, quote=False)

@@ -97,7 +97,7 @@ class Catalog:
             return self._by_id[module_id]
         except KeyError:
             raise CatalogError(
-                f"unknown module {shorten(module_id)} in catalogue {self.name!r} "
+                f"unknown module {shorten(module_id)} in catalogue {shorten(self.name)} "
                 f"(known: {', '.join(list(self._by_id)[:30])}{', ...' if len(self._by_id) > 30 else ''})"
             ) from None
 
@@ -155,6 +155,9 @@ MAX_ARMATURE = 1e3  # [kg m^2 | kg]
 MAX_POSITION = 100.0  # joint limits [rad | m]
 MIN_VELOCITY, MAX_VELOCITY = 1e-3, 1e3  # [rad/s | m/s]
 MAX_EFFORT = 1e6  # [N m | N]
+_TURN = "a twist is an angle in degrees; beyond a turn, it is a typo"
+#: The longest module id: an id is part of every composition name and URDF link name.
+MAX_ID_LENGTH = 100
 
 #: The largest DOF a grammar may ask for: longer chains are not robots anyone builds from modules,
 #: and the count of compositions grows as (modules per slot) ** DOF.
@@ -187,7 +190,12 @@ def _int_range(fields: Fields, key: str, default=None, *, maximum: int) -> tuple
 
 def _read_module(f: Fields) -> Module:
     module_id = f.string("id")
-    f.check("id", module_id.replace("_", "").isalnum(), f"expected letters, digits or '_', got {shorten(module_id)}")
+    f.check(
+        "id",
+        module_id.replace("_", "").isalnum() and len(module_id) <= MAX_ID_LENGTH,
+        f"expected at most {MAX_ID_LENGTH} letters, digits or '_' (an id is part of composition and URDF link "
+        f"names), got {shorten(module_id)}",
+    )
     kind = f.string("kind", choices=KINDS)
     movable = ("revolute", "prismatic")
     if kind == "joint":
@@ -212,8 +220,8 @@ def _read_module(f: Fields) -> Module:
         f.check("limits", not f.has("limits"), "a module without a joint has no limits; remove the key")
     armature = f.number("armature", default=0.0, minimum=0.0, maximum=MAX_ARMATURE)
     collision = f.string("collision", default="capsule" if kind == "link" else "sphere", choices=COLLISION_SHAPES)
-    twist_in = math.radians(f.number("twist_in_deg", default=0.0))
-    twist_out = math.radians(f.number("twist_out_deg", default=0.0))
+    twist_in = math.radians(f.number("twist_in_deg", default=0.0, minimum=-360.0, maximum=360.0, why=_TURN))
+    twist_out = math.radians(f.number("twist_out_deg", default=0.0, minimum=-360.0, maximum=360.0, why=_TURN))
     f.done()
     return Module(
         id=module_id,

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import functools
 import json
 import math
 import os
+import signal
 import sys
 import time
 from dataclasses import replace
@@ -14,8 +17,8 @@ from pathlib import Path
 import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
-from .exceptions import InfeasibleError, ModularRobotsError, Terminated, shorten
-from .execution import make_engine, terminations_raise
+from .exceptions import InfeasibleError, InputError, ModularRobotsError, Terminated, shorten
+from .execution import JOBS_PER_CORE, available_cores, make_engine, max_jobs, terminations_raise
 from .feasibility import (
     MAX_COMPOSITIONS,
     TEST_NAMES,
@@ -39,16 +42,19 @@ __all__ = ["main"]
 def _user_errors(command):
     """End every failure with a one-line ``Error: …`` and a non-zero exit, never a traceback:
     package errors and failed file operations exit 1, an interruption 130 (Ctrl-C) or 128 + the
-    signal's number (``SIGTERM``, ``SIGHUP``); anything else is reported as unexpected (set
-    ``MODULAR_ROBOTS_DEBUG=1`` for its traceback)."""
+    signal's number (``SIGTERM``, ``SIGHUP``, …; the first signal decides, later ones are ignored);
+    a reader that closed our output (``| head``) ends the command quietly; anything else is
+    reported as unexpected (set ``MODULAR_ROBOTS_DEBUG=1`` for its traceback)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         try:
-            with terminations_raise():
+            with terminations_raise(final=True):
                 return command(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
+        except BrokenPipeError:
+            _reader_gone()
         except ModularRobotsError as exc:
             first, _, details = str(exc).partition("\n")
             if details:  # a diagnosis: its details first, the sentence last
@@ -74,6 +80,14 @@ def _user_errors(command):
 def _fail(message: str, code: int) -> None:
     click.echo(f"Error: {message}", err=True)
     sys.exit(code)
+
+
+def _reader_gone() -> None:
+    """Exit as a command killed by ``SIGPIPE`` would (141), without a word: the reader of our
+    output has gone (``enumerate | head``). Output still buffered goes nowhere."""
+    with contextlib.suppress(OSError, ValueError):
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    sys.exit(128 + signal.SIGPIPE)
 
 
 def _os_error(exc: OSError) -> str:
@@ -103,21 +117,131 @@ class _Number(click.ParamType):
         return number
 
 
+#: Linux's limits on a file or folder name (``NAME_MAX``) and on a whole path (``PATH_MAX``, its
+#: final NUL included) [bytes].
+NAME_MAX, PATH_MAX = 255, 4096
+
+
+def _path_problem(path: Path) -> str | None:
+    """Why ``path`` can be neither opened nor created, or None: a name or the whole path too long,
+    a loop of symbolic links. Said before any work, without echoing a huge path."""
+    for part in path.parts:
+        if len(os.fsencode(part)) > NAME_MAX:
+            return f"{shorten(part)}: a file or folder name is at most {NAME_MAX} bytes"
+    size = len(os.fsencode(os.path.abspath(path)))
+    if size >= PATH_MAX:
+        return f"{shorten(str(path), 200)}: a path is at most {PATH_MAX - 1} bytes, this one has {size}"
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"{shorten(str(path), 200)}: a loop of symbolic links"
+        if exc.errno == errno.ENAMETOOLONG:
+            return f"{shorten(str(path), 200)}: {exc.strerror}"
+    return None
+
+
+def _output_path(text: str, kind: str) -> Path:
+    """``text`` as the path of an output (a results folder, a file): checked before any work, so
+    that hours of it are never lost to a name that cannot be written. It must be UTF-8 (it is
+    written into ``result.json`` and the page), and :func:`_path_problem` must find nothing."""
+    if not text.strip():
+        raise click.BadParameter(f"expected {kind}, got an empty name")
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        code = ord(text[exc.start])
+        byte = f"the byte 0x{code - 0xDC00:02x}" if 0xDC80 <= code <= 0xDCFF else f"the character U+{code:04X}"
+        raise click.BadParameter(
+            f"{shorten(text, 200)}: expected a name in UTF-8 (it is written into the results), got {byte}"
+        ) from None
+    problem = _path_problem(Path(text))
+    if problem:
+        raise click.BadParameter(problem)
+    return Path(text)
+
+
 def _folder_name(ctx, param, text: str | None) -> Path | None:
-    """``--out``: a usable path, checked before any work."""
+    """``--out`` of ``run`` and ``optimize``: a usable results folder (:func:`_output_path`)."""
     if text is None:
         return None
-    if not text.strip():
-        raise click.BadParameter("expected a folder, got an empty name")
-    value = Path(text)
-    for part in value.parts:
-        if len(os.fsencode(part)) > 255:
-            raise click.BadParameter(f"{shorten(part)}: a file or folder name is at most 255 bytes")
+    value = _output_path(text, "a folder")
     if value.exists() and not value.is_dir():
         raise click.BadParameter(f"{shorten(value, 200, quote=False)} exists and is not a folder")
     if value.resolve() == Path(value.resolve().anchor):
         raise click.BadParameter("the filesystem's root; expected a results folder")
     return value
+
+
+def _file_name(kind: str):
+    """The callback of an option naming a ``kind`` file to write (:func:`_output_path`); an existing
+    folder, device or pipe is refused (renaming a file onto it would replace it)."""
+
+    def check(ctx, param, text: str | None) -> Path | None:
+        if text is None:
+            return None
+        value = _output_path(text, f"a {kind} file name")
+        if value.exists() and not value.is_file():
+            raise click.BadParameter(
+                f"{shorten(value, 200, quote=False)} is not a regular file; expected a {kind} file name"
+            )
+        return value
+
+    return check
+
+
+class _ExistingPath(click.ParamType):
+    """An existing file (or folder) to read; its problems said in one short line."""
+
+    name = "path"
+
+    def __init__(self, folder: bool = False):
+        self.folder = folder
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, Path):
+            return value
+        path = Path(value)
+        problem = _path_problem(path)
+        if problem:
+            self.fail(problem, param, ctx)
+        if not path.exists():
+            self.fail(f"{shorten(value, 200, quote=False)}: no such {'folder' if self.folder else 'file'}", param, ctx)
+        if self.folder and not path.is_dir():
+            self.fail(f"{shorten(value, 200, quote=False)} is not a folder", param, ctx)
+        if not self.folder and path.is_dir():
+            self.fail(f"{shorten(value, 200, quote=False)} is a folder; expected a file", param, ctx)
+        return path
+
+
+class _Jobs(click.ParamType):
+    """``--jobs``: 0 (every core) to :func:`~modular_robots.execution.max_jobs`."""
+
+    name = "integer"
+
+    def convert(self, value, param, ctx):
+        try:
+            jobs = int(value)
+        except (TypeError, ValueError):
+            self.fail(f"expected a whole number, got {shorten(value)}", param, ctx)
+        if not 0 <= jobs <= max_jobs():
+            self.fail(
+                f"expected 0 (every core) to {max_jobs()} ({JOBS_PER_CORE} per core: more workers only share the "
+                f"{available_cores()} core(s) and each needs its own memory), got {shorten(jobs)}",
+                param,
+                ctx,
+            )
+        return jobs
+
+
+_jobs = click.option(
+    "--jobs",
+    "-j",
+    type=_Jobs(),
+    default=0,
+    show_default="all cores",
+    help="Worker processes (1: run in this process).",
+)
 
 
 def _space(scenario, jobs: int, max_compositions: int) -> int:
@@ -139,7 +263,7 @@ _max_compositions = click.option(
 )
 
 
-_existing_file = click.Path(exists=True, dir_okay=False, path_type=Path)
+_existing_file = _ExistingPath()
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -152,17 +276,25 @@ def main() -> None:
 @click.argument("source", type=_existing_file, metavar="SCENARIO_OR_CATALOG")
 @click.option("--count", is_flag=True, help="Print the number of compositions per DOF instead of their names.")
 @click.option("--dof", type=int, default=None, help="Only compositions with this many DOF.")
+@_max_compositions
 @_user_errors
-def enumerate_command(source: Path, count: bool, dof: int | None) -> None:
+def enumerate_command(source: Path, count: bool, dof: int | None, max_compositions: int) -> None:
     """Step A: list every composition the catalogue's grammar allows, one per line."""
     _, catalog = load_scenario_or_catalog(source)
+    counts = count_compositions(catalog, dof)
     if count:
-        counts = count_compositions(catalog, dof)
         click.echo("dof  compositions")
         for k, n in counts.items():
             click.echo(f"{k:<4d} {n}")
         click.echo(f"all  {sum(counts.values())}")
         return
+    total = sum(counts.values())
+    if total > max_compositions:
+        raise InputError(
+            f"the catalogue {shorten(catalog.name)} allows {total:,} compositions"
+            f"{f' of {dof} DOF' if dof is not None else ''}: too many to list. Count them (--count), choose "
+            f"a DOF (--dof) or raise the limit of {max_compositions:,} (--max-compositions)"
+        )
     for composition in enumerate_compositions(catalog, dof):
         click.echo(composition.name)
 
@@ -182,14 +314,10 @@ def enumerate_command(source: Path, count: bool, dof: int | None) -> None:
     default=None,
     help="Payload [kg]; default: the scenario's, or 0 for a catalogue.",
 )
-@click.option(
-    "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="URDF file to write."
-)
+@click.option("-o", "--output", type=str, callback=_file_name("URDF"), required=True, help="URDF file to write.")
 @_user_errors
 def urdf_command(composition: str, source: Path, payload: float | None, output: Path) -> None:
     """Write the URDF of COMPOSITION (e.g. B-J1-L2-E1), payload at tool0."""
-    if not str(output).strip() or output.is_dir():
-        raise click.BadParameter("expected a file name for the URDF", param_hint="-o/--output")
     if "+" in composition:
         raise click.BadParameter(
             f"{shorten(composition)}: a '+clear' or '+fastest' suffix names a candidate of `optimize`; "
@@ -206,14 +334,7 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 
 @main.command("filter")
 @click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
-@click.option(
-    "--jobs",
-    "-j",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default="all cores",
-    help="Worker processes (1: run in this process).",
-)
+@_jobs
 @click.option(
     "--seeds",
     type=click.IntRange(min=1, max=1000),
@@ -224,7 +345,8 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 @click.option(
     "--out",
     "out",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=str,
+    callback=_file_name("JSON"),
     default=None,
     help="Write the verdict summary and the survivors with their boundary configurations as JSON.",
 )
@@ -236,10 +358,6 @@ def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None,
     settings = FeasibilitySettings(seeds=seeds)
     engine = make_engine(jobs)
     if out is not None:
-        if out.exists() and not out.is_file():  # a folder, or a device a rename would replace
-            raise click.BadParameter(
-                f"{shorten(out, 200, quote=False)} is not a regular file; expected a JSON file name", param_hint="--out"
-            )
         check_writable(out.parent)
     total = _space(scenario, engine.jobs, max_compositions)
     summary = FeasibilitySummary()
@@ -349,14 +467,7 @@ def optimize_command(
     default=None,
     help="Override the ratio rule's threshold.",
 )
-@click.option(
-    "--jobs",
-    "-j",
-    type=click.IntRange(min=0),
-    default=0,
-    show_default="all cores",
-    help="Worker processes (1: run in this process).",
-)
+@_jobs
 @_max_compositions
 @_user_errors
 def run_command(
@@ -364,6 +475,8 @@ def run_command(
 ) -> None:
     """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
     scenario = with_pruning(load_scenario(scenario_path), rule, threshold)
+    if threshold is not None and scenario.pruning.rule == "none":
+        click.echo(f"warning: --threshold {threshold:g} has no effect: the rule none never prunes", err=True)
     out = out or Path("results") / scenario.name
     _space(scenario, make_engine(jobs).jobs, max_compositions)
     click.echo(
@@ -396,7 +509,7 @@ def run_command(
 
 
 @main.command("export")
-@click.argument("results", type=click.Path(exists=True, file_okay=False, path_type=Path), metavar="RESULTS_DIR")
+@click.argument("results", type=_ExistingPath(folder=True), metavar="RESULTS_DIR")
 @click.option("--rate", type=_Number(1.0, 1e5), default=1000.0, show_default=True, help="Controller rate [Hz].")
 @_user_errors
 def export_command(results: Path, rate: float) -> None:
@@ -407,7 +520,7 @@ def export_command(results: Path, rate: float) -> None:
 
 
 @main.command("view")
-@click.argument("results", type=click.Path(exists=True, file_okay=False, path_type=Path), metavar="RESULTS_DIR")
+@click.argument("results", type=_ExistingPath(folder=True), metavar="RESULTS_DIR")
 @click.option("--open", "open_page", is_flag=True, help="Open the page in the default browser.")
 @_user_errors
 def view_command(results: Path, open_page: bool) -> None:

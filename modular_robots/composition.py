@@ -63,7 +63,7 @@ def _check_grammar(name: str, modules: list[Module], catalog: Catalog) -> None:
     g = catalog.grammar
 
     def fail(message: str) -> CompositionError:
-        return CompositionError(f"composition {shorten(name)}: {message} (catalogue {catalog.name!r})")
+        return CompositionError(f"composition {shorten(name)}: {message} (catalogue {shorten(catalog.name)})")
 
     if modules[0].kind != "base":
         raise fail(f"must start with a base module, not {modules[0].id} ({modules[0].kind})")
@@ -145,5 +145,5 @@ def _dof_range(catalog: Catalog, dof: int | None) -> range:
     if dof is None:
         return range(low, high + 1)
     if not low <= dof <= high:
-        raise CompositionError(f"--dof {dof}: the catalogue {catalog.name!r} allows {low} to {high} DOF")
+        raise CompositionError(f"--dof {dof}: the catalogue {shorten(catalog.name)} allows {low} to {high} DOF")
     return range(dof, dof + 1)

@@ -11,6 +11,8 @@ __all__ = [
     "ScenarioError",
     "CompositionError",
     "InfeasibleError",
+    "ResultsFolderError",
+    "FolderBusyError",
     "Terminated",
     "shorten",
 ]
@@ -43,6 +45,15 @@ class CompositionError(InputError):
 class InfeasibleError(ModularRobotsError):
     """The task cannot be done: no composition (or not the one asked for) passes step B, or every
     candidate's optimisation failed. The message says which test or failure decided it."""
+
+
+class ResultsFolderError(ModularRobotsError):
+    """A results folder cannot be used: its lock file is not one this package made (a link, a
+    device, a file with other names), or it is held."""
+
+
+class FolderBusyError(ResultsFolderError):
+    """Another process of this package holds the results folder's lock."""
 
 
 class Terminated(KeyboardInterrupt):

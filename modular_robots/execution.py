@@ -22,11 +22,14 @@ compute bit for bit the same.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import itertools
 import multiprocessing
 import os
 import signal
+import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -34,7 +37,7 @@ from typing import Any, Protocol, TypeVar
 
 from threadpoolctl import ThreadpoolController, threadpool_limits
 
-from .exceptions import ModularRobotsError, Terminated
+from .exceptions import InputError, ModularRobotsError, Terminated, shorten
 
 __all__ = [
     "Engine",
@@ -42,6 +45,8 @@ __all__ = [
     "ProcessEngine",
     "make_engine",
     "available_cores",
+    "max_jobs",
+    "resolve_jobs",
     "Executor",
     "InProcessExecutor",
     "ProcessExecutor",
@@ -59,32 +64,106 @@ def single_threaded_blas() -> contextlib.AbstractContextManager:
     return threadpool_limits(limits=1)
 
 
-#: The signals that end a run as an interruption: ``kill``/``timeout``/a batch scheduler, a closed terminal.
-TERMINATING = (signal.SIGTERM, signal.SIGHUP)
+#: The signals that end a run as an interruption, recorded: Ctrl-C, ``kill``/``timeout``/a batch
+#: scheduler, a closed terminal, Ctrl-\, the user signals, a CPU-time limit, an alarm. (``SIGKILL``
+#: and ``SIGSTOP`` cannot be caught; Python ignores ``SIGPIPE`` and ``SIGXFSZ``, so a write fails.)
+ENDING = (
+    signal.SIGINT,
+    signal.SIGTERM,
+    signal.SIGHUP,
+    signal.SIGQUIT,
+    signal.SIGUSR1,
+    signal.SIGUSR2,
+    signal.SIGXCPU,
+    signal.SIGALRM,
+)
+#: The first ending signal received within :func:`terminations_raise` (None: none yet), how many
+#: such blocks are open, the read end of the pipe the signals are written to as they arrive, and
+#: the process that set the handlers (a worker forked from it inherits them for a moment).
+_ending: dict[str, int | None] = {"signum": None, "depth": 0, "arrivals": None, "pid": None}
 
 
 @contextlib.contextmanager
-def terminations_raise() -> Iterator[None]:
-    """Within the block, ``SIGTERM`` and ``SIGHUP`` raise :class:`~modular_robots.exceptions.Terminated`
-    in the main thread (where they would otherwise end the process on the spot), so that a run's
-    ``finally`` blocks and its record of the ending run as they do for Ctrl-C. Signals whose
-    handler the application set itself are left alone, and so is a block outside the main thread.
+def terminations_raise(final: bool = False) -> Iterator[None]:
+    """Within the block, the first of the :data:`ENDING` signals raises in the main thread
+    (where most would otherwise end the process on the spot): ``KeyboardInterrupt`` for Ctrl-C,
+    :class:`~modular_robots.exceptions.Terminated` for the others, so that a run's ``finally``
+    blocks and its record of the ending run. Every later one is ignored until the block ends: a
+    second Ctrl-C or a supervisor repeating ``SIGTERM`` would interrupt that record, and the first
+    signal decides how the run ends. Signals whose handler the application set itself are left
+    alone, and so is a block outside the main thread.
+
+    Parameters
+    ----------
+    final
+        The process ends after the block (the command line): once a signal has arrived, the
+        signals stay ignored after it too, while the process reports and exits.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {}
-    for signum in TERMINATING:
-        if signal.getsignal(signum) == signal.SIG_DFL:
-            previous[signum] = signal.signal(signum, _raise_terminated)
+    with contextlib.ExitStack() as outer:
+        if _ending["depth"] == 0:
+            _ending["signum"], _ending["pid"] = None, os.getpid()
+            outer.enter_context(_arrivals())
+        _ending["depth"] += 1
+        previous = {}
+        for signum in ENDING:
+            if signal.getsignal(signum) in (signal.SIG_DFL, signal.default_int_handler):
+                previous[signum] = signal.signal(signum, _end_on_signal)
+        try:
+            yield
+        finally:
+            _ending["depth"] -= 1
+            ignore = final and _ending["signum"] is not None
+            for signum, handler in previous.items():
+                signal.signal(signum, signal.SIG_IGN if ignore else handler)
+
+
+@contextlib.contextmanager
+def _arrivals() -> Iterator[None]:
+    """Within the block, the signals are written to a pipe as the process receives them
+    (``set_wakeup_fd``), so that the first can be told: Python runs the handlers of signals
+    pending together in the order of their numbers, not of their arrival (a ``SIGHUP`` 2 ms after a
+    ``SIGTERM``, while the main thread is in a long solver call, would be handled first). (Signals
+    sent while the process is not running reach it in the order of their numbers: no process can
+    tell them apart.) Left alone if the application uses the wake-up file itself."""
+    read, write = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+    previous = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
+    if previous != -1:
+        signal.set_wakeup_fd(previous)
+    else:
+        _ending["arrivals"] = read
     try:
         yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        if _ending["arrivals"] == read:
+            signal.set_wakeup_fd(-1)
+            _ending["arrivals"] = None
+        os.close(read)
+        os.close(write)
 
 
-def _raise_terminated(signum, frame) -> None:
+def _first_arrived(signum: int) -> int:
+    """The ending signal that arrived first (:func:`_arrivals`), ``signum`` if it cannot be told."""
+    with contextlib.suppress(OSError, TypeError):
+        for byte in os.read(_ending["arrivals"], 4096):
+            if byte in ENDING:
+                return byte
+    return signum
+
+
+def _end_on_signal(signum, frame) -> None:
+    if os.getpid() != _ending["pid"]:  # a worker not yet quiet (_quiet_worker_signals): the parent decides
+        if signum == signal.SIGTERM:  # but its shutdown ends the worker, as in a quiet one
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+        return
+    if _ending["signum"] is not None:  # the run is already ending: the first signal decides how
+        return
+    signum = _ending["signum"] = _first_arrived(signum)
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     raise Terminated(signum)
 
 
@@ -93,6 +172,34 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+#: At most this many workers per available core: more only share the cores, each holding its own
+#: models and solver (about 130 MB), and step B's estimate no longer holds.
+JOBS_PER_CORE = 4
+
+
+def max_jobs() -> int:
+    """The most workers a run may ask for (:data:`JOBS_PER_CORE` per available core)."""
+    return JOBS_PER_CORE * available_cores()
+
+
+def resolve_jobs(jobs: int | None = None) -> int:
+    """The number of workers for ``jobs``: ``None`` or 0 is every available core.
+
+    Raises
+    ------
+    InputError
+        For a negative number or more than :func:`max_jobs`.
+    """
+    if not jobs:
+        return available_cores()
+    if not 0 < jobs <= max_jobs():
+        raise InputError(
+            f"jobs: expected 0 (every core) to {max_jobs()} ({JOBS_PER_CORE} per available core: more workers "
+            f"only share the {available_cores()} core(s)), got {shorten(jobs)}"
+        )
+    return jobs
 
 
 # -- engines: map a function over a stream -------------------------------------------------------
@@ -134,16 +241,43 @@ _CONTEXT: Any = None
 
 
 def _quiet_worker_signals() -> None:
-    """In a worker: the parent decides when to stop (Ctrl-C or a closed terminal reach the whole
-    process group), and ``SIGTERM`` (the parent's shutdown) ends the worker at once, silently,
-    instead of the parent's handler inherited through ``fork``."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGHUP, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    """In a worker: the parent decides when to stop (Ctrl-C, Ctrl-\\ or a closed terminal reach
+    the whole process group), and ``SIGTERM`` (the parent's shutdown) ends the worker at once,
+    silently, instead of the parent's handler inherited through ``fork`` (nor does it write to the
+    parent's wake-up pipe)."""
+    with contextlib.suppress(ValueError):  # not in the main thread: no wake-up file to reset
+        signal.set_wakeup_fd(-1)
+    for signum in ENDING:
+        signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM else signal.SIG_IGN)
 
 
-def _start_worker(context: Any) -> None:
+#: ``prctl``'s request to be sent a signal when the parent ends (Linux, ``<sys/prctl.h>``).
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent(parent: int) -> None:
+    """In a worker of the process ``parent``: end when the parent ends, however it ends (the OOM
+    killer's ``SIGKILL`` too), instead of waiting forever for work. On Linux the kernel sends the
+    worker ``SIGKILL`` when the thread that started it ends (``PR_SET_PDEATHSIG``); elsewhere a
+    thread checks every second that the parent is still there."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            if ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
+                if os.getppid() != parent:  # it ended before the request
+                    os._exit(1)
+                return
+    threading.Thread(target=_watch_parent, args=(parent,), name="watch-parent", daemon=True).start()
+
+
+def _watch_parent(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(1.0)
+    os._exit(1)
+
+
+def _start_worker(parent: int, context: Any) -> None:
     global _CONTEXT
+    _die_with_parent(parent)
     _CONTEXT = context
     _quiet_worker_signals()
     threadpool_limits(limits=1)
@@ -160,11 +294,11 @@ class ProcessEngine:
     """
 
     def __init__(self, jobs: int | None = None, window: int = 16):
-        self.jobs = jobs or available_cores()
+        self.jobs = resolve_jobs(jobs)
         self.window = window
 
     def map_chunks(self, work, context, items, chunksize=16):
-        with ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(context,)) as pool:
+        with ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(os.getpid(), context)) as pool:
             pending: deque = deque()
             try:
                 for chunk in _chunks(items, chunksize):
@@ -179,8 +313,9 @@ class ProcessEngine:
 
 
 def make_engine(jobs: int | None = None) -> Engine:
-    """``jobs`` = 1: :class:`SerialEngine`; ``None`` or 0: every available core."""
-    jobs = jobs or available_cores()
+    """``jobs`` = 1: :class:`SerialEngine`; ``None`` or 0: every available core
+    (:func:`resolve_jobs`)."""
+    jobs = resolve_jobs(jobs)
     return SerialEngine() if jobs == 1 else ProcessEngine(jobs)
 
 
@@ -250,7 +385,8 @@ class InProcessExecutor:
                 job.close()
 
 
-def _worker(conn, factory, context, specs, names) -> None:
+def _worker(parent, conn, factory, context, specs, names) -> None:
+    _die_with_parent(parent)
     _quiet_worker_signals()
     threadpool_limits(limits=1)
     executor = InProcessExecutor(factory, context, specs, names)
@@ -289,7 +425,7 @@ class ProcessExecutor:
             parent, child = ctx.Pipe()
             proc = ctx.Process(
                 target=_worker,
-                args=(child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
+                args=(os.getpid(), child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
                 daemon=True,
             )
             proc.start()
@@ -352,8 +488,9 @@ def make_executor(
     names: Sequence[str],
     jobs: int | None = None,
 ) -> Executor:
-    """``jobs`` = 1: :class:`InProcessExecutor`; ``None`` or 0: a worker process per core."""
-    jobs = jobs or available_cores()
+    """``jobs`` = 1: :class:`InProcessExecutor`; ``None`` or 0: a worker process per core
+    (:func:`resolve_jobs`)."""
+    jobs = resolve_jobs(jobs)
     if jobs == 1:
         return InProcessExecutor(factory, context, specs, names)
     return ProcessExecutor(factory, context, specs, names, jobs)

@@ -32,7 +32,7 @@ import numpy as np
 from .catalog import Catalog
 from .collision import CollisionModel
 from .composition import Composition, count_compositions, enumerate_compositions
-from .exceptions import InputError
+from .exceptions import InputError, shorten
 from .execution import Engine, make_engine
 from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
 from .robot import RobotModel, robot_model
@@ -470,14 +470,14 @@ def composition_space(catalog: Catalog, max_compositions: int = MAX_COMPOSITIONS
     if total == 0:
         low, high = catalog.grammar.dof
         raise InputError(
-            f"the catalogue {catalog.name!r} allows no composition (grammar.dof [{low}, {high}] with its modules); "
-            "nothing to check"
+            f"the catalogue {shorten(catalog.name)} allows no composition (grammar.dof [{low}, {high}] with its "
+            "modules); nothing to check"
         )
     if total > max_compositions:
         low, high = catalog.grammar.dof
         raise InputError(
-            f"the catalogue {catalog.name!r} allows {total:,} compositions ({low} to {high} DOF); step B would take "
-            f"about {_duration(estimate_seconds(total, jobs))} on {jobs} core(s). Narrow its "
+            f"the catalogue {shorten(catalog.name)} allows {total:,} compositions ({low} to {high} DOF); step B would "
+            f"take about {_duration(estimate_seconds(total, jobs))} on {jobs} core(s). Narrow its "
             f"grammar (grammar.dof) or raise the limit of {max_compositions:,} (--max-compositions)"
         )
     return total

@@ -1,11 +1,15 @@
-"""The results folder on disk: one run at a time, files replaced whole, nothing left of an older run.
+"""The results folder on disk: one writer at a time, files replaced whole, nothing removed that is
+not ours.
 
 :class:`ResultsFolder` holds an exclusive lock (``.lock``, an ``flock`` the kernel releases when
-the process ends, however it ends) for as long as a run writes into the folder; a second run
-into the same folder is refused with :class:`FolderBusyError`. Every file is written to a
-temporary name unique to the writer and renamed into place (:func:`atomic_write`), so a reader,
-a crash or a full disk never leaves half a file under a result's name, and a failed write removes
-its temporary file.
+the process ends, however it ends) while a run, an export or a page writes into the folder; a
+second one is refused with :class:`FolderBusyError`. The lock file is opened without following a
+link and must be a regular file with no other name, so a planted ``.lock`` cannot make us write
+into another file. Every file is written to a temporary name unique to the writer and marked as
+ours (:data:`TEMPORARY_MARK`), then renamed into place (:func:`atomic_write`), so a reader, a
+crash or a full disk never leaves half a file under a result's name; a failed write removes its
+temporary file, and a crashed writer's is removed by the next lock holder, recognised by its mark
+alone: a user's ``.notes.tmp`` is never taken for one.
 """
 
 from __future__ import annotations
@@ -14,15 +18,32 @@ import contextlib
 import errno
 import fcntl
 import os
+import re
+import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from .exceptions import ModularRobotsError
+from .exceptions import FolderBusyError, ResultsFolderError, shorten
 
-__all__ = ["ResultsFolder", "FolderBusyError", "atomic_write", "atomic_path", "check_writable", "LOCK"]
+__all__ = [
+    "ResultsFolder",
+    "FolderBusyError",
+    "atomic_write",
+    "atomic_path",
+    "check_writable",
+    "is_temporary",
+    "LOCK",
+    "TEMPORARY_MARK",
+]
 
 LOCK = ".lock"
+#: In the name of every temporary file this package writes, and of no other file:
+#: ``.<name>.<8 random characters>.modular-robots-tmp<suffix>``.
+TEMPORARY_MARK = ".modular-robots-tmp"
+_TEMPORARY = re.compile(r"\..*\.[a-z0-9_]{8}" + re.escape(TEMPORARY_MARK) + r"(\.[A-Za-z0-9]+)?")
+#: What a run waiting for the folder is told to do.
+RUN_HINT = "wait for it to end or choose another folder (--out)"
 
 
 def _umask() -> int:
@@ -35,16 +56,25 @@ def _umask() -> int:
 _MODE = 0o666 & ~_umask()
 
 
-class FolderBusyError(ModularRobotsError):
-    """Another run holds the results folder's lock."""
+def is_temporary(name: str) -> bool:
+    """Whether the file name ``name`` is one of this package's temporary files."""
+    return _TEMPORARY.fullmatch(name) is not None
+
+
+def _temporary_beside(path: Path) -> tuple[int, str]:
+    """Create a temporary file beside ``path``; an ``OSError`` names ``path``, not the temporary."""
+    try:
+        return tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f"{TEMPORARY_MARK}{path.suffix}")
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
 
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path`` to write to; renamed onto ``path`` when the block ends
-    normally, removed when it raises."""
+    normally, removed when it raises. An ``OSError`` names ``path``, never the temporary."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}")
+    fd, tmp = _temporary_beside(path)
     os.fchmod(fd, _MODE)
     os.close(fd)
     try:
@@ -54,7 +84,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         if isinstance(exc, OSError) and exc.errno and exc.filename in (None, tmp):
-            raise OSError(exc.errno, exc.strerror, str(path)) from exc  # name the file, not its temporary
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
 
 
@@ -68,7 +98,7 @@ def check_writable(folder: str | Path) -> None:
     """Raise ``OSError`` now if no file can be created in ``folder`` (before hours of work whose
     result could not be saved)."""
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".probe.", suffix=".tmp")
+        fd, tmp = _temporary_beside(Path(folder) / "probe")
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror, str(folder)) from None
     os.close(fd)
@@ -76,31 +106,43 @@ def check_writable(folder: str | Path) -> None:
 
 
 class ResultsFolder:
-    """The folder ``path`` (created if missing), locked for one run.
+    """The folder ``path`` (created if missing), locked for one writer.
+
+    On entering, a crashed writer's temporary files are removed (:func:`is_temporary`); nothing
+    else is.
 
     Parameters
     ----------
     path
         The results folder.
-    stale
-        Names of files a previous run may have left (its winner's files): removed once the lock is
-        held, so the folder holds only this run's files.
+    busy_hint
+        What the refusal tells the user to do when another process holds the folder.
+    create
+        Create the folder if it is missing (a run); otherwise its absence is an ``OSError``
+        (an export of a run's folder).
     """
 
-    def __init__(self, path: str | Path, stale: Iterable[str] = ()):
+    def __init__(self, path: str | Path, busy_hint: str = RUN_HINT, create: bool = True):
         self.path = Path(path)
-        self._stale = tuple(stale)
+        self.busy_hint = busy_hint
+        self.create = create
         self._fd: int | None = None
 
     def __enter__(self) -> ResultsFolder:
-        self.path.mkdir(parents=True, exist_ok=True)
-        self._fd = _lock(self.path / LOCK)
-        for name in self._stale:
-            with contextlib.suppress(FileNotFoundError):
-                (self.path / name).unlink()
-        for leftover in self.path.glob(".*.tmp*"):  # a crashed writer's, never a live one's: we hold the lock
-            with contextlib.suppress(OSError):
-                leftover.unlink()
+        if self.create:
+            self.path.mkdir(parents=True, exist_ok=True)
+        elif not self.path.is_dir():
+            missing = not self.path.exists()
+            raise OSError(
+                errno.ENOENT if missing else errno.ENOTDIR,
+                "no such folder" if missing else "not a folder",
+                str(self.path),
+            )
+        self._fd = _lock(self.path / LOCK, self.busy_hint)
+        for leftover in self.path.iterdir():  # a crashed writer's, never a live one's: we hold the lock
+            if is_temporary(leftover.name):
+                with contextlib.suppress(OSError):
+                    leftover.unlink()
         return self
 
     def __exit__(self, *exc) -> bool:
@@ -112,16 +154,17 @@ class ResultsFolder:
         return False
 
     def remove(self, names: Iterable[str]) -> None:
-        """Remove the files ``names`` of this folder if they exist."""
+        """Remove the files ``names`` of this folder if they exist (never the lock, nor a folder)."""
         for name in names:
-            with contextlib.suppress(FileNotFoundError):
-                (self.path / name).unlink()
+            if name != LOCK:
+                with contextlib.suppress(FileNotFoundError, IsADirectoryError):
+                    (self.path / name).unlink()
 
 
-def _lock(path: Path) -> int:
-    """Open and lock ``path``; retry if a finishing run removed it between our open and lock."""
+def _lock(path: Path, busy_hint: str) -> int:
+    """Open and lock ``path``; retry if a finishing holder removed it between our open and lock."""
     for _ in range(10):
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = _open_lock(path)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -129,12 +172,11 @@ def _lock(path: Path) -> int:
             os.close(fd)
             if exc.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
                 raise FolderBusyError(
-                    f"{path.parent}: another run is writing into this results folder{holder}; "
-                    "wait for it to end or choose another folder (--out)"
+                    f"{path.parent}: another run is writing into this results folder{holder}; {busy_hint}"
                 ) from None
             raise
         try:
-            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+            same = os.fstat(fd).st_ino == os.stat(path, follow_symlinks=False).st_ino
         except FileNotFoundError:
             same = False
         if same:
@@ -143,6 +185,32 @@ def _lock(path: Path) -> int:
             return fd
         os.close(fd)
     raise FolderBusyError(f"{path.parent}: could not lock the results folder (its lock file keeps changing)")
+
+
+def _open_lock(path: Path) -> int:
+    """Open the lock file ``path``, created if missing: never through a link, never a device,
+    pipe, folder or a file that has another name (a hard link), whose content we would replace."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise _not_a_lock(path, "a symbolic link") from None
+        if exc.errno in (errno.EISDIR, errno.ENXIO):
+            raise _not_a_lock(path, "a folder" if exc.errno == errno.EISDIR else "a device or socket") from None
+        raise OSError(exc.errno, exc.strerror, str(path.parent)) from None  # the folder is unwritable
+    info = os.fstat(fd)
+    if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
+        os.close(fd)
+        raise _not_a_lock(path, "a file with another name too" if stat.S_ISREG(info.st_mode) else "a device or pipe")
+    return fd
+
+
+def _not_a_lock(path: Path, what: str) -> ResultsFolderError:
+    return ResultsFolderError(
+        f"{shorten(path, 200, quote=False)}: expected the lock file of a results folder, got {what}; "
+        "remove it (no run of this package made it) and run again"
+    )
 
 
 def _read_holder(fd: int) -> str:

@@ -20,7 +20,7 @@ import numpy as np
 
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
-from .exceptions import CompositionError, InfeasibleError, Terminated
+from .exceptions import CompositionError, InfeasibleError, Terminated, shorten
 from .execution import make_engine, make_executor, single_threaded_blas
 from .feasibility import (
     MAX_COMPOSITIONS,
@@ -219,7 +219,7 @@ def optimize_composition(
     """
     base, _, only = name.partition("+")
     if only and only not in tuple(BoundaryPair):
-        raise CompositionError(f"{name!r}: the suffix after '+' must be one of {', '.join(tuple(BoundaryPair))}")
+        raise CompositionError(f"{shorten(name)}: the suffix after '+' must be one of {', '.join(tuple(BoundaryPair))}")
     chain = Composition.from_name(base, scenario.catalog)
     start = time.perf_counter()
     verdict = check_composition(chain, scenario.catalog, scenario.task)

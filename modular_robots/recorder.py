@@ -22,18 +22,18 @@ from pathlib import Path
 import numpy as np
 
 from .collision import Approach
-from .exceptions import Terminated
+from .exceptions import ResultsFolderError, Terminated, shorten
 from .execution import terminations_raise
 from .folder import ResultsFolder, atomic_write
 from .ocp.candidate import CandidateResult
 from .ocp.tracking import Tracking
 from .ocp.trajectory import Trajectory
 from .ocp.verification import Verification
-from .report import RESULT, WINNER_FILES, write_pruning_plot, write_winner_files
+from .report import RESULT, WINNER_FILES, is_export, write_pruning_plot, write_winner_files
 from .scenario import Scenario
-from .viewer import VIEWER, write_viewer
+from .viewer import VIEWER, write_page
 
-__all__ = ["RunRecorder", "RESULT", "STATUSES"]
+__all__ = ["RunRecorder", "RESULT", "STATUSES", "previous_files"]
 
 #: ``running`` until the run ends; then ``done``, ``infeasible`` (no composition passes step B),
 #: ``failed`` (no candidate verified, or an error), or ``interrupted``.
@@ -62,7 +62,7 @@ class RunRecorder:
 
     def __init__(self, out: str | Path | None, scenario: Scenario, **settings):
         self.path = Path(out) if out is not None else None
-        self._folder = ResultsFolder(self.path, _previous_files(self.path)) if self.path is not None else None
+        self._folder = ResultsFolder(self.path) if self.path is not None else None
         self._exits = contextlib.ExitStack()
         self.scenario = scenario
         self.settings = {
@@ -85,6 +85,8 @@ class RunRecorder:
         with contextlib.ExitStack() as stack:
             if self._folder is not None:
                 stack.enter_context(self._folder)
+                self._folder.remove(previous_files(self.path))
+                _check_replaceable(self.path)
             stack.enter_context(terminations_raise())
             self._write()
             self._exits = stack.pop_all()
@@ -134,16 +136,18 @@ class RunRecorder:
         files = {}
         if self.path is not None:
             start = time.perf_counter()
+            before = _identities(self.path, (*WINNER_FILES, VIEWER))
             try:
                 files = write_winner_files(self.path, winner)
                 if pruning_plot_title is not None:
                     files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
                 self.winner = _winner_json(winner, files, tracking, approach)
                 self._write()  # the page is drawn from the folder's files, result.json included
-                files["viewer"] = write_viewer(self.path)
+                files["viewer"] = write_page(self.path)
             except BaseException:  # no winner file without a result.json that names it
                 self.winner = None
-                self._folder.remove((*WINNER_FILES, VIEWER))
+                after = _identities(self.path, before)
+                self._folder.remove(name for name in before if after[name] != before[name])  # what we wrote
                 raise
             self.seconds["report"] = time.perf_counter() - start
         self.winner = _winner_json(winner, files, tracking, approach)
@@ -153,8 +157,13 @@ class RunRecorder:
         """End the run with ``status`` (one of :data:`STATUSES`) and rewrite the document."""
         if status not in STATUSES[1:]:
             raise ValueError(f"a run ends as one of {STATUSES[1:]}, not {status!r}")
+        before = self.status, self.message
         self.status, self.message = status, message
-        self._write()
+        try:
+            self._write()
+        except BaseException:  # not written: a signal now still finds the run running, and records it
+            self.status, self.message = before
+            raise
 
     def _end(self, status: str, message: str) -> None:
         """:meth:`finish` while the block is left by an exception: if the document cannot be
@@ -163,7 +172,7 @@ class RunRecorder:
         try:
             self.finish(status, message)
         except OSError as exc:
-            self.message = f"{message}; result.json cut short: {_describe(exc)}"
+            self.status, self.message = status, f"{message}; result.json cut short: {_describe(exc)}"
             with contextlib.suppress(OSError):
                 _overwrite(self.path / RESULT, json.dumps(self.summary(), indent=1) + "\n")
 
@@ -212,19 +221,57 @@ def _task_json(scenario: Scenario) -> dict:
     }
 
 
-def _previous_files(folder: Path) -> list[str]:
-    """The files a previous run left in ``folder``: its winner's files and controller-rate exports."""
-    names = {*WINNER_FILES, VIEWER, "trajectory.json"}
-    with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
-        names.update(json.loads((folder / RESULT).read_text())["winner"]["files"].values())
-    with contextlib.suppress(OSError):
-        names.update(p.name for p in folder.glob("trajectory_*hz.csv"))
-    return sorted(n for n in names if isinstance(n, str) and n.strip(".") and "/" not in n and n != RESULT)
+def previous_files(folder: Path) -> list[str]:
+    """The files a previous run of this package left in ``folder``, which a new run removes:
+    the winner's files its ``result.json`` names, and controller-rate exports of that winner.
+
+    Only names this package writes are ever returned, and only when ``result.json`` is one of ours:
+    a folder of the user's keeps its ``joints.png``, and a forged ``result.json`` that names
+    ``.lock`` or a user's file has it ignored.
+    """
+    try:
+        document = json.loads((folder / RESULT).read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):  # missing, unreadable, not JSON (or not UTF-8)
+        return []
+    if not isinstance(document, dict) or document.get("status") not in STATUSES or "settings" not in document:
+        return []
+    winner = document.get("winner")
+    files = winner.get("files") if isinstance(winner, dict) else None
+    named = {n for n in files.values() if isinstance(n, str)} if isinstance(files, dict) else set()
+    names = [n for n in (*WINNER_FILES, VIEWER) if n in named]
+    if names:
+        with contextlib.suppress(OSError):
+            names += sorted(p.name for p in folder.iterdir() if is_export(p.name))
+    return names
+
+
+def _check_replaceable(folder: Path) -> None:
+    """Refuse, before any work, a folder where a file the run writes could not be renamed into
+    place: a folder, device or pipe of that name (the run would fail only at its end)."""
+    for name in (RESULT, *WINNER_FILES, VIEWER):
+        path = folder / name
+        if path.exists() and not path.is_file():
+            raise ResultsFolderError(
+                f"{shorten(path, 200, quote=False)}: expected a file a run may replace (or nothing), got a folder, "
+                "device or pipe; remove it or choose another folder (--out)"
+            )
+
+
+def _identities(folder: Path, names) -> dict[str, tuple[int, int] | None]:
+    """Each file's (device, inode), None if missing: a file replaced or created since differs."""
+    out = {}
+    for name in names:
+        try:
+            info = os.stat(folder / name, follow_symlinks=False)
+            out[name] = (info.st_dev, info.st_ino)
+        except OSError:
+            out[name] = None
+    return out
 
 
 def _overwrite(path: Path, text: str) -> None:
     """Write ``text`` over the file ``path`` in place (its old blocks are reused: no new space)."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     try:
         os.ftruncate(fd, 0)
         os.write(fd, text.encode())

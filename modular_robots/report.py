@@ -9,23 +9,27 @@ Every file is written to a temporary name and renamed into place
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from .exceptions import InputError, shorten
-from .folder import atomic_path, atomic_write
+from .folder import ResultsFolder, atomic_path, atomic_write
 from .ocp.candidate import CandidateResult, CandidateStatus
 from .ocp.trajectory import Trajectory, controller_rate, joint_trajectory
-from .robot import robot_from_urdf
+from .robot import RobotModel, robot_from_urdf
 
 __all__ = [
     "read_winner",
+    "winner_robot",
     "plot_joints",
     "plot_pruning_history",
     "write_pruning_plot",
     "write_winner_files",
+    "export_name",
+    "is_export",
     "URDF",
     "TRAJECTORY",
     "JOINTS_PLOT",
@@ -40,6 +44,22 @@ JOINTS_PLOT = "joints.png"
 PRUNING_PLOT = "pruning.png"
 #: The files a run writes besides ``result.json`` (and only when it has a winner).
 WINNER_FILES = (URDF, TRAJECTORY, JOINTS_PLOT, PRUNING_PLOT)
+#: ``export``'s files: the plan at a controller rate (:func:`export_name`) and as a ROS
+#: ``JointTrajectory``.
+JOINT_TRAJECTORY = "trajectory.json"
+_EXPORT = re.compile(r"trajectory_[0-9]+(\.[0-9]+)?hz\.csv")
+
+
+def export_name(rate: float) -> str:
+    """``trajectory_<rate>hz.csv``, the rate written in full (``333.3333``, ``1000``): the name
+    says the file's exact rate."""
+    text = repr(float(rate))
+    return f"trajectory_{text.removesuffix('.0')}hz.csv"
+
+
+def is_export(name: str) -> bool:
+    """Whether ``name`` is one of ``export``'s files."""
+    return name == JOINT_TRAJECTORY or _EXPORT.fullmatch(name) is not None
 
 
 def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -> dict[str, str]:
@@ -73,30 +93,65 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     exactly between its rows, so the new rows are the plan's own values, not an interpolation;
     torques come from the inverse dynamics of ``winner.urdf`` with the drives of ``result.json``
     (:func:`~modular_robots.ocp.trajectory.controller_rate`). Writes
-    ``trajectory_<rate>hz.csv`` (no ``qdd`` columns: the zero-order-hold contract of SPEC §7) and
-    ``trajectory.json`` (ROS ``trajectory_msgs/JointTrajectory``); returns their paths.
+    ``trajectory_<rate>hz.csv`` (:func:`export_name`; no ``qdd`` columns: the zero-order-hold
+    contract of SPEC §7) and ``trajectory.json`` (ROS ``trajectory_msgs/JointTrajectory``);
+    returns their paths. The folder is locked meanwhile, so a run cannot start into it.
 
     Raises
     ------
     InputError
-        If the folder has no winner to export.
+        If the folder has no winner to export, or the plan at ``rate`` would have more than
+        :data:`~modular_robots.ocp.trajectory.MAX_ROWS` rows.
+    FolderBusyError
+        If a run is writing into the folder.
     """
-    document, urdf, trajectory = read_winner(folder)
-    winner = document["winner"]
     folder = Path(folder)
-    try:
-        robot = robot_from_urdf(urdf, (winner.get("drive") or {}).get("armature"))
-    except (ValueError, RuntimeError, TypeError) as exc:
-        raise InputError(f"{folder}: the winner's URDF cannot be loaded ({shorten(exc, 120, quote=False)})") from None
-    if robot.nv != trajectory.nv:
-        raise InputError(f"{folder}: the winner's URDF has {robot.nv} joints, its trajectory {trajectory.nv}")
-    resampled = controller_rate(trajectory, robot, rate)
-    csv_path = folder / f"trajectory_{rate:g}hz.csv"
-    with atomic_path(csv_path) as tmp:
-        resampled.write_csv(tmp, accelerations=False)
-    json_path = folder / "trajectory.json"
-    atomic_write(json_path, json.dumps(joint_trajectory(resampled, robot.joint_names)) + "\n")
+    with ResultsFolder(folder, busy_hint="export it once that run has ended", create=False):
+        document, urdf, trajectory = read_winner(folder)
+        robot = winner_robot(folder, document, urdf, trajectory)
+        try:
+            resampled = controller_rate(trajectory, robot, rate)
+        except ValueError as exc:
+            raise InputError(f"{folder}: {exc}") from None
+        csv_path = folder / export_name(rate)
+        with atomic_path(csv_path) as tmp:
+            resampled.write_csv(tmp, accelerations=False)
+        json_path = folder / JOINT_TRAJECTORY
+        atomic_write(json_path, json.dumps(joint_trajectory(resampled, robot.joint_names)) + "\n")
     return {"csv": csv_path, "json": json_path}
+
+
+def winner_robot(folder: Path, document: dict, urdf: str, trajectory: Trajectory) -> RobotModel:
+    """The model of a results folder's winner (:func:`read_winner`'s parts), with its drives'
+    armature: for the export's torques and the page's poses, which refuse the same damage alike.
+
+    Raises
+    ------
+    InputError
+        If ``winner.urdf`` is not a loadable URDF, ``winner.drive.armature`` is not one number
+        per joint, or the URDF's joints are not the trajectory's.
+    """
+    path = Path(folder) / document["winner"]["files"]["urdf"]
+    try:
+        robot = robot_from_urdf(urdf)
+    except (ValueError, RuntimeError, TypeError) as exc:
+        raise InputError(f"{path}: expected the URDF a run writes ({shorten(exc, 120, quote=False)})") from None
+    if robot.nv != trajectory.nv:
+        raise InputError(f"{path}: expected {trajectory.nv} joints (as in the trajectory), got {robot.nv}")
+    drive = document["winner"].get("drive")
+    armature = drive.get("armature") if isinstance(drive, dict) else None
+    if armature is None:
+        return robot
+    if (
+        not isinstance(armature, list)
+        or len(armature) != robot.nv
+        or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0.0 <= a < 1e9 for a in armature)
+    ):
+        raise InputError(
+            f"{Path(folder) / RESULT}: winner.drive.armature: expected {robot.nv} numbers >= 0 (one per joint), "
+            f"got {shorten(armature)}"
+        )
+    return robot_from_urdf(urdf, armature)
 
 
 def read_winner(folder: str | Path) -> tuple[dict, str, Trajectory]:

@@ -26,6 +26,10 @@ MIN_TRAVEL = 1e-3
 MAX_NODES = 100
 MAX_SUBSTEPS = 100
 MAX_ITERATIONS = 100_000
+#: The loosest optimality and constraint tolerances of step C: looser, the solver stops at once
+#: with a plan that eats the margins and fails verification (which checks defects to 1e-3).
+MAX_TOLERANCE = 1e-2
+_LOOSE = "looser, the solver stops before the plan keeps its constraints and margins"
 
 
 @dataclass(frozen=True)
@@ -199,8 +203,14 @@ def _read_optimizer(f: Fields | None) -> OptimizerSettings:
         nodes=f.integer("nodes", default=d.nodes, minimum=3, maximum=MAX_NODES, why=_DENSE),
         substeps=f.integer("substeps", default=d.substeps, minimum=1, maximum=MAX_SUBSTEPS, why=_DENSE),
         max_iterations=f.integer("max_iterations", default=d.max_iterations, minimum=1, maximum=MAX_ITERATIONS),
-        tolerance=f.number("tolerance", default=d.tolerance, exclusive_minimum=0.0),
-        constraint_tolerance=f.number("constraint_tolerance", default=d.constraint_tolerance, exclusive_minimum=0.0),
+        tolerance=f.number("tolerance", default=d.tolerance, exclusive_minimum=0.0, maximum=MAX_TOLERANCE, why=_LOOSE),
+        constraint_tolerance=f.number(
+            "constraint_tolerance",
+            default=d.constraint_tolerance,
+            exclusive_minimum=0.0,
+            maximum=MAX_TOLERANCE,
+            why=_LOOSE,
+        ),
         transcription=f.string("transcription", default=d.transcription, choices=TRANSCRIPTIONS),
         clearance_margin=f.number("clearance_margin", default=d.clearance_margin, minimum=0.0, maximum=1.0),
         effort_margin=f.number("effort_margin", default=d.effort_margin, exclusive_minimum=0.0, maximum=1.0),

@@ -16,6 +16,7 @@ from string import Template
 
 from .catalog import Catalog, Module
 from .composition import Composition
+from .folder import atomic_write
 
 __all__ = ["composition_urdf", "write_urdf", "PAYLOAD_RADIUS", "link_name"]
 
@@ -159,7 +160,8 @@ def _payload(mass: float, collision: bool) -> str:
 
 
 def write_urdf(path: str | Path, composition: Composition, catalog: Catalog, payload: float = 0.0) -> Path:
-    """Write :func:`composition_urdf` to ``path`` and return the path."""
+    """Write :func:`composition_urdf` to ``path`` and return the path: whole or not at all (a full
+    disk leaves no truncated file; :func:`~modular_robots.folder.atomic_write`)."""
     path = Path(path)
-    path.write_text(composition_urdf(composition, catalog, payload), encoding="utf-8")
+    atomic_write(path, composition_urdf(composition, catalog, payload))
     return path

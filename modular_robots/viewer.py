@@ -11,6 +11,7 @@ offline, and makes no request.
 from __future__ import annotations
 
 import html
+import io
 import json
 from importlib import resources
 from pathlib import Path
@@ -19,12 +20,12 @@ import numpy as np
 import yourdfpy
 
 from .exceptions import InputError, shorten
-from .folder import atomic_write
+from .folder import ResultsFolder, atomic_write
 from .ocp.trajectory import Trajectory
-from .report import read_winner
+from .report import read_winner, winner_robot
 from .robot import robot_from_urdf
 
-__all__ = ["VIEWER", "write_viewer", "scene_data", "FRAME_RATE", "HEADLESS_CHROMIUM"]
+__all__ = ["VIEWER", "write_viewer", "write_page", "scene_data", "FRAME_RATE", "HEADLESS_CHROMIUM"]
 
 VIEWER = "winner.html"
 #: Frames per second of motion stored in the page (the player shows the nearest frame).
@@ -49,20 +50,32 @@ _COLOURS = {"B": "#6c757d", "J": "#f0a202", "L": "#2f6db5", "E": "#8e44ad", "pay
 
 def write_viewer(folder: str | Path) -> str:
     """Write ``winner.html`` into the results folder ``folder`` from its files; return its name.
+    The folder is locked meanwhile, so a run cannot start into it (:func:`write_page`).
 
     Raises
     ------
     InputError
-        If the folder has no readable winner (:func:`~modular_robots.report.read_winner`).
+        If the folder has no readable winner (:func:`~modular_robots.report.read_winner`,
+        :func:`~modular_robots.report.winner_robot`).
+    FolderBusyError
+        If a run is writing into the folder.
     """
+    with ResultsFolder(folder, busy_hint="view it once that run has ended", create=False):
+        return write_page(folder)
+
+
+def write_page(folder: str | Path) -> str:
+    """:func:`write_viewer` without taking the folder's lock: for the run that holds it."""
     folder = Path(folder)
-    document, _, trajectory = read_winner(folder)
+    document, urdf, trajectory = read_winner(folder)
+    winner_robot(folder, document, urdf, trajectory)
     urdf_path = folder / document["winner"]["files"]["urdf"]
     try:
         scene = scene_data(urdf_path, trajectory, document)
-    except (ValueError, RuntimeError, TypeError, KeyError, AttributeError) as exc:
+    except (ValueError, RuntimeError, TypeError, KeyError, AttributeError, SyntaxError) as exc:
         raise InputError(f"{urdf_path}: cannot pose the winner ({shorten(exc, 120, quote=False)})") from None
-    atomic_write(folder / VIEWER, page(scene, panel(document), f"{document['winner']['candidate']} — modular-robots"))
+    title = f"{document['winner']['candidate']} — modular-robots"
+    atomic_write(folder / VIEWER, page(scene, panel(document), title))
     return VIEWER
 
 
@@ -70,8 +83,9 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: dict) -> dict:
     """What the page draws: per link its shapes and per frame its pose, the tool path, the
     obstacles with the clearance margin, the start and goal. Poses are 4x4 matrices, column-major
     (three.js's order), in the base frame [m]."""
-    urdf = yourdfpy.URDF.load(str(urdf_path), load_meshes=False)
-    joints = robot_from_urdf(urdf_path.read_text()).joint_names
+    text = Path(urdf_path).read_bytes()  # parsed from memory: lxml takes no file name it cannot encode
+    urdf = yourdfpy.URDF.load(io.BytesIO(text), load_meshes=False)
+    joints = robot_from_urdf(text.decode("utf-8")).joint_names
     tf = float(trajectory.t[-1])
     count = int(min(MAX_FRAMES, max(2, np.ceil(tf * FRAME_RATE) + 1)))
     times = np.linspace(0.0, tf, count)

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from modular_robots import CatalogError, ScenarioError, load_catalog, load_scenario
+from modular_robots import CatalogError, Composition, CompositionError, ScenarioError, load_catalog, load_scenario
 
 from .conftest import PAPER_CATALOG, PAPER_SCENARIO
 
@@ -77,6 +77,19 @@ def _line(text: str, needle: str) -> int:
             "modules[3].length",
             "expected a number <= 10, got 1e+09",
         ),
+        (
+            "twist_in_deg: 90",
+            "twist_in_deg: 1.0e9",
+            "modules[3].twist_in_deg",
+            "expected a number <= 360 (a twist is an angle in degrees; beyond a turn, it is a typo), got 1e+09",
+        ),
+        (
+            "id: L1\n",
+            "id: L" + "1" * 200 + "\n",
+            "modules[3].id",
+            "expected at most 100 letters, digits or '_' (an id is part of composition and URDF link names), "
+            f"got 'L{'1' * 58}... (201 characters)",
+        ),
     ],
     ids=[
         "unknown-key",
@@ -92,6 +105,8 @@ def _line(text: str, needle: str) -> int:
         "unphysical-inertia",
         "inertia-not-positive-definite",
         "absurd-length",
+        "absurd-twist",
+        "long-id",
     ],
 )
 def test_catalog_errors_name_file_line_key(tmp_path, old, new, key, message):
@@ -111,6 +126,91 @@ def test_malformed_yaml_names_the_line(tmp_path):
     path = _catalog(tmp_path, "    mass: 0.9\n", "    mass: [0.9\n")
     with pytest.raises(CatalogError, match=rf"^{re.escape(str(path))}:\d+: malformed YAML: "):
         load_catalog(path)
+
+
+def _digits(count: int) -> str:
+    """How a message shows a literal of ``count`` digits "1000…": cut, with its length."""
+    return f"1{'0' * 59}... ({count} characters)"
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "needle", "message"),
+    [
+        ("payload: 50.0", "payload: 1:30", "payload:", "task.payload: expected a number, got the string '1:30'"),
+        ("payload: 50.0", "payload: 1_0", "payload:", "task.payload: expected a number, got the string '1_0'"),
+        (
+            "payload: 50.0",
+            "payload: 2024-01-01",
+            "payload:",
+            "task.payload: expected a number, got the string '2024-01-01'",
+        ),
+        (
+            "payload: 50.0",
+            "payload: 1" + "0" * 5000,
+            "payload:",
+            f"task.payload: expected a number of magnitude at most 1e+09, got {_digits(5001)}",
+        ),
+        (
+            "nodes: 8",
+            "nodes: 1" + "0" * 5000,
+            "nodes:",
+            "optimizer.nodes: expected an integer <= 100 (the solver's matrices are dense: memory and time grow "
+            f"with the square of the problem's size), got {_digits(5001)}",
+        ),
+        (
+            "name: paper",
+            "name: paper\n? [a, b]\n: 1",
+            "? [a, b]",
+            "(top level): expected keys that are names, got a list as a key",
+        ),
+        (
+            "name: paper",
+            "name: paper\n{a: 1}: 2",
+            "{a: 1}",
+            "(top level): expected keys that are names, got a mapping as a key",
+        ),
+        (
+            "name: paper",
+            "name: paper\n7: x",
+            "7: x",
+            "(top level): expected keys that are names, got the number 7 as a key",
+        ),
+        ("name: paper", "name: paper\n~: x", "~: x", "(top level): expected keys that are names, got nothing as a key"),
+        (
+            "  rule: ratio",
+            "  rule: ratio\n  on: 1",
+            "  on: 1",
+            "pruning.on: unknown key (expected one of: admission, gate, lookahead, patience, reference, rule, "
+            "start_iteration, threshold, window)",
+        ),
+    ],
+    ids=[
+        "base-60",
+        "underscore",
+        "date",
+        "long-number",
+        "long-integer",
+        "list-key",
+        "mapping-key",
+        "number-key",
+        "null-key",
+        "yaml-1.1-boolean",
+    ],
+)
+def test_yaml_is_read_by_the_yaml_1_2_core_schema(tmp_path, old, new, needle, message):
+    """The docs promise YAML 1.2: what YAML 1.1 reads as base 60, octal, dates or booleans (and
+    Python cannot convert, or hash) is reported at its line and key like any other wrong value."""
+    path = _scenario(tmp_path, old, new)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert str(info.value) == f"{path}:{_line(path.read_text(), needle)}: {message}"
+
+
+@pytest.mark.parametrize(
+    ("text", "payload"), [("010", 10.0), ("0o10", 8.0), ("0x10", 16.0), ("1e1", 10.0), ("+.5", 0.5)]
+)
+def test_yaml_1_2_numbers(tmp_path, text, payload):
+    assert load_scenario(_scenario(tmp_path, "payload: 50.0", f"payload: {text}")).task.payload == payload
 
 
 def test_missing_file(tmp_path):
@@ -187,6 +287,13 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         ),
         ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 3, got 1"),
         (
+            "nodes: 8",
+            "nodes: 8\n  constraint_tolerance: 1.0e6",
+            "constraint_tolerance:",
+            "optimizer.constraint_tolerance: expected a number <= 0.01 (looser, the solver stops before the plan "
+            "keeps its constraints and margins), got 1e+06",
+        ),
+        (
             "threshold: 0.5",
             "threshold: half",
             "threshold:",
@@ -232,6 +339,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         "unknown-key",
         "self-collision",
         "too-few-nodes",
+        "loose-tolerance",
         "threshold-type",
         "unknown-rule",
         "negative-patience",
@@ -256,6 +364,37 @@ def test_catalogue_error_inside_a_scenario_names_the_catalogue(tmp_path):
         CatalogError, match=r"catalogs/paper.yaml:\d+: modules\[2\].mass: expected a number > 0, got -0.9$"
     ):
         load_scenario(path)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "start"),
+    [
+        ("cost: time", "cost: " + "x" * 30000, "task.cost: expected one of time, effort; got 'xxx"),
+        ("rule: ratio", "rule: " + "r" * 30000, "pruning.rule: expected one of ratio, paper, none; got 'rrr"),
+        ("name: paper", "name: paper\n? " + "k" * 30000 + "\n: 1", "kkk"),
+        ("name: paper", "name: paper\ncatalog_x: " + "v" * 30000, "catalog_x: unknown key"),
+    ],
+    ids=["choice", "rule", "unknown-key", "unknown-key-value"],
+)
+def test_messages_cut_the_values_they_echo(tmp_path, old, new, start):
+    path = _scenario(tmp_path, old, new)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    message = str(info.value).split(": ", 1)[1]
+    assert message.startswith(start) and len(message) < 300, message[:400]
+
+
+def test_a_huge_catalogue_name_is_cut_where_it_is_echoed(tmp_path):
+    path = _catalog(tmp_path, "name: paper", "name: " + "N" * 30000)
+    catalog = load_catalog(path)
+    cut = f"'{'N' * 59}... (30000 characters)"
+    with pytest.raises(CompositionError) as info:
+        Composition.from_name("B-J1-E1", catalog)
+    assert str(info.value) == (
+        f"composition 'B-J1-E1': 0 link(s) after a joint; the grammar allows 1 to 1 (catalogue {cut})"
+    )
+    with pytest.raises(CatalogError, match=re.escape(f"unknown module 'X9' in catalogue {cut} (known:")):
+        catalog.module("X9")
 
 
 def test_shipped_scenarios_load():

@@ -8,14 +8,17 @@ would meet it.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import re
 import resource
 import shutil
 import signal
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -23,11 +26,14 @@ import pytest
 from click.testing import CliRunner
 
 from modular_robots import Composition, InputError, ScenarioError, SphereObstacle, load_scenario
+from modular_robots.__main__ import main as entry_point
 from modular_robots._yamlio import load_yaml
 from modular_robots.cli import main
 from modular_robots.collision import CULL_DISTANCE, CollisionModel, reach_bound
+from modular_robots.execution import available_cores, max_jobs
 from modular_robots.folder import LOCK, ResultsFolder
 from modular_robots.pipeline import run_scenario
+from modular_robots.recorder import previous_files
 from modular_robots.robot import robot_model
 
 from .conftest import ROOT
@@ -69,16 +75,15 @@ def _processes_of(out: Path) -> list[int]:
     return found
 
 
-# -- 1. every termination is recorded ------------------------------------------------------------
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
-def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, signum):
-    out = tmp_path / "out"
+def _run_until_step_c(out: Path, jobs: int, **popen) -> subprocess.Popen:
+    """``run`` of the small scenario into ``out``, once its step C has started."""
     child = subprocess.Popen(
-        [*CLI, "run", str(SMALL), "--jobs", "2", "--out", str(out)],
+        [*CLI, "run", str(SMALL), "--jobs", str(jobs), "--out", str(out)],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        **popen,
     )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and child.poll() is None:
@@ -88,6 +93,14 @@ def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, s
         except (OSError, ValueError):
             pass
         time.sleep(0.02)
+    return child
+
+
+# -- 1. every termination is recorded ------------------------------------------------------------
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT])
+def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, signum):
+    out = tmp_path / "out"
+    child = _run_until_step_c(out, jobs=2)
     child.send_signal(signum)
     _, stderr = child.communicate(timeout=60)
     name = signal.Signals(signum).name
@@ -100,6 +113,121 @@ def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, s
     assert _leftovers(out) == []  # no lock, no temporary file
     time.sleep(0.2)
     assert _processes_of(out) == []  # no worker outlives the run
+
+
+@pytest.mark.parametrize(
+    ("first", "then", "group", "jobs"),
+    [(signal.SIGINT, signal.SIGINT, True, 2), (signal.SIGTERM, signal.SIGHUP, False, 1)],
+    ids=["ctrl-c-hammered", "term-then-hup-every-2-ms"],
+)
+def test_signals_in_quick_succession_end_the_run_as_the_first_one_says(tmp_path, first, then, group, jobs):
+    """A second Ctrl-C, or a supervisor repeating its signal, must not interrupt the record of the
+    ending: every signal after the first is ignored, and the first names the ending everywhere."""
+    out = tmp_path / "out"
+    child = _run_until_step_c(out, jobs, start_new_session=group)
+    send = (lambda signum: os.killpg(child.pid, signum)) if group else child.send_signal
+    send(first)
+    _wait_until_delivered(child.pid, first)  # pending together, the kernel delivers the lower number first
+    deadline = time.monotonic() + 1.5
+    while child.poll() is None and time.monotonic() < deadline:
+        with contextlib.suppress(ProcessLookupError):
+            send(then)
+        time.sleep(0.002)
+    _, stderr = child.communicate(timeout=60)
+    said = "interrupted by the user" if first == signal.SIGINT else f"terminated by {signal.Signals(first).name}"
+    assert child.returncode == 128 + first, stderr
+    assert "Traceback" not in stderr and stderr.rstrip().splitlines()[-1] == f"Error: {said}"
+    document = _document(out)
+    assert document["status"] == "interrupted" and document["message"].startswith(said)
+    assert document["counts"]["candidates"] == len(document["candidates"]) == 6
+
+
+def _wait_until_delivered(pid: int, signum: int) -> None:
+    """Wait until the process ``pid`` no longer has ``signum`` pending (its handler has it)."""
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        with contextlib.suppress(OSError, StopIteration):
+            status = Path(f"/proc/{pid}/status").read_text().splitlines()
+            pending = next(int(line.split()[1], 16) for line in status if line.startswith("ShdPnd:"))
+            if not pending >> (signum - 1) & 1:
+                return
+        time.sleep(0.001)
+
+
+def test_ctrl_c_while_the_libraries_load_ends_in_one_line(monkeypatch, capsys):
+    """The command's entry point loads the command line (numpy, scipy, Pinocchio: seconds) where it
+    can catch Ctrl-C."""
+
+    class Loading(types.ModuleType):
+        def __getattr__(self, name):
+            raise KeyboardInterrupt
+
+    monkeypatch.setitem(sys.modules, "modular_robots.cli", Loading("modular_robots.cli"))
+    with pytest.raises(SystemExit) as info:
+        entry_point()
+    assert info.value.code == 130 and capsys.readouterr().err == "Error: interrupted by the user\n"
+
+
+_POOLS = """
+import sys, time
+from modular_robots.execution import ProcessEngine, make_executor
+
+
+def work(context, chunk):
+    time.sleep(600)
+
+
+class Sleeper:
+    result = None
+
+    def iterate(self):
+        time.sleep(600)
+        yield
+
+    def close(self):
+        pass
+
+
+if sys.argv[1] == "engine":
+    list(ProcessEngine(2).map_chunks(work, None, range(4), chunksize=1))
+else:
+    make_executor(lambda context, spec: Sleeper(), None, [0, 1], ["a", "b"], 2).advance(["a", "b"])
+"""
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, IndexError):
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("pool", ["engine", "executor"])
+def test_workers_end_when_their_parent_is_killed(tmp_path, pool):
+    """Step B's pool and step C's workers, their parent killed by the OOM killer (``SIGKILL``):
+    they end at once instead of waiting forever for work."""
+    script = tmp_path / "pools.py"
+    script.write_text(_POOLS)
+    parent = subprocess.Popen([sys.executable, str(script), pool])
+    deadline = time.monotonic() + 60
+    while len(workers := _children(parent.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert len(workers) == 2
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 10
+    while any(map(_alive, workers)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(map(_alive, workers))
 
 
 @pytest.mark.parametrize(
@@ -152,19 +280,36 @@ def test_a_file_size_limit_ends_the_run_as_failed_with_a_sentence(tmp_path):
 
 
 # -- 2 and 3. a folder holds one run's files, and one run at a time ---------------------------------
-def test_a_run_removes_the_previous_runs_winner_files(tmp_path):
+def test_a_run_removes_the_previous_runs_files_and_no_other(tmp_path):
+    """Only names this package writes, only in a folder whose result.json is ours and names them,
+    and only our own temporary files: never the lock, a user's file or a user's ``.x.tmp``."""
     out = tmp_path / "out"
     out.mkdir()
-    (out / "winner.urdf").write_text("<robot/>")
-    (out / "old-trajectory.csv").write_text("t\n")
-    (out / "notes.txt").write_text("mine")
-    (out / ".trajectory.csv.tmp").write_text("half")
-    (out / "result.json").write_text(json.dumps({"winner": {"files": {"trajectory": "old-trajectory.csv"}}}))
+    named = {"urdf": "winner.urdf", "trajectory": "trajectory.csv", "lock": ".lock", "notes": "notes.txt"}
+    (out / "result.json").write_text(json.dumps({"status": "done", "settings": {}, "winner": {"files": named}}))
+    ours = ["winner.urdf", "trajectory.csv", "trajectory_100hz.csv", "trajectory.json"]
+    theirs = ["notes.txt", ".session.tmp", ".notes.tmp.bak", ".vimrc.tmpl", "trajectory_fast.csv"]
+    for name in [*ours, *theirs, ".trajectory.k2j4h1g0.modular-robots-tmp.csv"]:  # the last: a crashed writer's
+        (out / name).write_text("x")
     infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
     result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(out)])
     assert result.exit_code == 1 and "no composition is feasible" in result.output
     assert _document(out)["status"] == "infeasible"
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "result.json"]  # the user's file stays
+    assert sorted(p.name for p in out.iterdir()) == sorted(["result.json", *theirs])
+
+
+def test_a_folder_without_our_result_json_keeps_every_file(tmp_path):
+    home = tmp_path / "home"
+    home.mkdir()
+    names = [".vimrc.tmpl", ".session.tmp", ".notes.tmp.bak", "joints.png", "winner.urdf", "thesis.tex"]
+    for name in names:
+        (home / name).write_text("mine")
+    (home / "result.json").write_text('{"winner": {"files": {"plot": "joints.png"}}}')  # not a run's
+    infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
+    result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(home)])
+    assert result.exit_code == 1
+    assert sorted(p.name for p in home.iterdir()) == sorted(["result.json", *names])
+    assert all((home / name).read_text() == "mine" for name in names)
 
 
 def test_a_second_run_into_a_locked_folder_is_refused(tmp_path):
@@ -178,6 +323,44 @@ def test_a_second_run_into_a_locked_folder_is_refused(tmp_path):
         "wait for it to end or choose another folder (--out)"
     )
     assert sorted(p.name for p in out.iterdir()) == []  # the lock is released, nothing was written
+
+
+@pytest.mark.parametrize("plant", ["symlink", "hard link", "fifo"])
+def test_a_planted_lock_file_is_refused_and_what_it_points_to_is_untouched(tmp_path, plant):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    {"symlink": lambda: os.symlink(victim, out / LOCK), "hard link": lambda: os.link(victim, out / LOCK)}.get(
+        plant, lambda: os.mkfifo(out / LOCK)
+    )()
+    result = CliRunner().invoke(main, ["run", str(SMALL), "--jobs", "1", "--out", str(out)])
+    got = {"symlink": "a symbolic link", "hard link": "a file with another name too", "fifo": "a device or pipe"}[plant]
+    assert result.exit_code == 1
+    assert result.output.splitlines()[-1] == (
+        f"Error: {out}/.lock: expected the lock file of a results folder, got {got}; "
+        "remove it (no run of this package made it) and run again"
+    )
+    assert victim.read_text() == "precious\n" and sorted(p.name for p in out.iterdir()) == [LOCK]
+
+
+def test_a_folder_where_a_winner_file_cannot_go_is_refused_before_any_work(tmp_path):
+    out = tmp_path / "out"
+    (out / "winner.urdf").mkdir(parents=True)
+    result = CliRunner().invoke(main, ["run", str(SMALL), "--jobs", "1", "--out", str(out)])
+    assert result.exit_code == 1 and "step" not in result.output.splitlines()[-1]
+    assert result.output.splitlines()[-1] == (
+        f"Error: {out}/winner.urdf: expected a file a run may replace (or nothing), got a folder, device or pipe; "
+        "remove it or choose another folder (--out)"
+    )
+    assert sorted(p.name for p in out.iterdir()) == ["winner.urdf"]
+
+
+def test_a_forged_result_json_cannot_name_the_lock_or_a_users_file(tmp_path):
+    (tmp_path / "result.json").write_text(
+        json.dumps({"status": "done", "settings": {}, "winner": {"files": {"a": ".lock", "b": "keep.txt"}}})
+    )
+    assert previous_files(tmp_path) == []
 
 
 def test_filter_checks_its_output_before_step_b(tmp_path):
@@ -250,11 +433,66 @@ def test_a_space_too_large_for_step_b_is_refused_with_its_count_and_an_estimate(
         (["run", str(SMALL), "--out", ""], "expected a folder, got an empty name"),
         (["run", str(SMALL), "--out", "r/" + "x" * 300], "a file or folder name is at most 255 bytes"),
         (["export", ".", "--rate", "nan"], "expected a finite number, got nan"),
+        (
+            ["run", str(SMALL), "--jobs", "1" + "0" * 30],
+            f"expected 0 (every core) to {max_jobs()} (4 per core: more workers only share the "
+            f"{available_cores()} core(s) and each needs its own memory), got 1{'0' * 30}",
+        ),
+        (["filter", str(SMALL), "--jobs", str(max_jobs() + 1)], f"got {max_jobs() + 1}"),
     ],
 )
 def test_senseless_cli_values_are_refused(tmp_path, args, message):
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 2 and message in result.output, result.output
+
+
+def test_output_paths_are_checked_before_any_work(tmp_path):
+    """A name that cannot be written (not UTF-8, too long, a loop of links) is refused before the
+    hours of work whose result it would lose, in one line that does not echo a huge path."""
+    os.symlink("loop", tmp_path / "loop")
+    loop = str(tmp_path / "loop")
+    deep = str(tmp_path / "/".join(["d" * 250] * 20))
+    cut = f"'{deep[:199]}... ({len(deep)} characters)"
+    too_long = f"{cut}: a path is at most 4095 bytes, this one has {len(deep)}"
+    cases = [
+        (
+            ["run", str(SMALL), "--out", str(tmp_path / "r\udcff")],
+            "'--out'",
+            f"'{tmp_path}/r\\udcff': expected a name in UTF-8 (it is written into the results), got the byte 0xff",
+        ),
+        (["optimize", "B-J1-L1-E1", "--scenario", str(SMALL), "--out", deep], "'--out'", too_long),
+        (["run", str(SMALL), "--out", loop], "'--out'", f"'{loop}': a loop of symbolic links"),
+        (["filter", str(SMALL), "--out", f"{loop}/v.json"], "'--out'", f"'{loop}/v.json': a loop of symbolic links"),
+        (["urdf", "B-J1-L1-E1", "--scenario", str(SMALL), "-o", deep], "'-o' / '--output'", too_long),
+        (
+            ["urdf", "B-J1-L1-E1", "--scenario", str(SMALL), "-o", "/dev/null"],
+            "'-o' / '--output'",
+            "/dev/null is not a regular file; expected a URDF file name",
+        ),
+    ]
+    for args, option, message in cases:
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+        assert result.output.splitlines()[-1] == f"Error: Invalid value for {option}: {message}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["loop"]
+
+
+def test_a_urdf_that_does_not_fit_is_not_left_cut_short(tmp_path):
+    """``urdf -o`` at a file-size limit: no truncated file, and the message names it."""
+    target = tmp_path / "x.urdf"
+
+    def limit_file_size():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
+
+    done = subprocess.run(
+        [*CLI, "urdf", "B-J1-L1-J1-L1-J1-L1-E2", "--scenario", str(SMALL), "-o", str(target)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=limit_file_size,
+    )
+    assert done.returncode == 1 and done.stderr == f"Error: {target}: File too large\n"
+    assert list(tmp_path.iterdir()) == []
 
 
 # -- 7. the CLI's last line is always a sentence ----------------------------------------------------
@@ -268,12 +506,47 @@ def test_inputs_that_used_to_escape_as_tracebacks_end_in_one_line(tmp_path):
         (["enumerate", str(png)], f"Error: {png}:1: expected UTF-8 text, got the byte 0x89 (is it a YAML file?)"),
         (["enumerate", str(two)], f"Error: {two}:2: expected one YAML document, found a second one here (after '---')"),
         (["urdf", huge, "--scenario", str(SMALL), "-o", str(tmp_path / "x.urdf")], "(30004 characters)"),
+        (
+            ["optimize", "B-J1-L1-E1+" + "c" * 30000, "--scenario", str(SMALL), "--out", str(tmp_path / "r")],
+            "... (30011 characters): the suffix after '+' must be one of fastest, clear",
+        ),
     ]
     for args, expected in cases:
         result = CliRunner().invoke(main, args)
         assert result.exit_code == 1 and "Traceback" not in result.output, result.output
         assert expected in result.output.splitlines()[-1]
         assert len(result.output) < 600
+
+
+def test_enumerate_refuses_to_list_more_than_run_would_check(tmp_path):
+    catalog = tmp_path / "c.yaml"
+    catalog.write_text((ROOT / "scenarios" / "catalogs" / "paper-4dof.yaml").read_text().replace("[2, 4]", "[2, 12]"))
+    result = CliRunner().invoke(main, ["enumerate", str(catalog)])
+    assert result.exit_code == 1
+    assert result.output == (
+        "Error: the catalogue 'paper-4dof' allows 870,712,932 compositions: too many to list. Count them (--count), "
+        "choose a DOF (--dof) or raise the limit of 1,000,000 (--max-compositions)\n"
+    )
+    assert CliRunner().invoke(main, ["enumerate", str(catalog), "--dof", "2"]).output.count("\n") == 12
+
+
+def test_enumerate_into_a_closed_pipe_ends_quietly():
+    """``enumerate | head``: the reader has gone; no error, the exit status of ``SIGPIPE``."""
+    child = subprocess.Popen(
+        [*CLI, "enumerate", str(ROOT / "scenarios" / "catalogs" / "paper.yaml")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert child.stdout.readline() == b"B-J1-L1-E1\n"
+    child.stdout.close()
+    assert child.wait(timeout=60) == 128 + signal.SIGPIPE and child.stderr.read() == b""
+
+
+def test_a_threshold_the_rule_does_not_use_is_warned_about(tmp_path):
+    infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
+    args = ["run", str(infeasible), "--jobs", "1", "--out", str(tmp_path / "r"), "--rule", "none", "--threshold", "0.1"]
+    result = CliRunner().invoke(main, args)
+    assert "warning: --threshold 0.1 has no effect: the rule none never prunes\n" in result.output
 
 
 def test_yaml_merge_keys_may_override_and_own_duplicates_may_not(tmp_path):
@@ -360,6 +633,84 @@ def test_export_and_view_refuse_a_damaged_trajectory_naming_row_and_column(finis
         assert result.exit_code == 1, result.output
         assert result.output == f"Error: {folder}/{message}\n"
     assert not (folder / "trajectory.json").exists()
+
+
+def test_export_and_view_refuse_a_row_that_breaks_the_acceleration_contract(finished, tmp_path):
+    """A last row moved to t = 1e9 (which once made export allocate terabytes)."""
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    rows = (folder / "trajectory.csv").read_text().splitlines()
+    rows[-1] = "1e9" + rows[-1][rows[-1].index(",") :]
+    (folder / "trajectory.csv").write_text("\n".join(rows) + "\n")
+    for command in (["export", str(folder)], ["view", str(folder)]):
+        result = CliRunner().invoke(main, command)
+        assert result.exit_code == 1
+        assert re.fullmatch(
+            rf"Error: {folder}/trajectory\.csv:{len(rows)}: column q1: expected \S+ \(the row before under the "
+            r"acceleration contract\), got \S+\n",
+            result.output,
+        ), result.output
+
+
+def test_export_refuses_more_rows_than_a_controller_could_use(finished, tmp_path):
+    """A plan that rests at its goal until t = 2000 s is a plan (the page shows it), but not a
+    million rows a second."""
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    rows = (folder / "trajectory.csv").read_text().splitlines()
+    rows.append("2000" + rows[-1][rows[-1].index(",") :])
+    (folder / "trajectory.csv").write_text("\n".join(rows) + "\n")
+    result = CliRunner().invoke(main, ["export", str(folder), "--rate", "1000"])
+    assert result.exit_code == 1
+    assert result.output == (
+        f"Error: {folder}: rate: 1000 Hz over the plan's 2000 s makes 2e+06 rows; expected at most 1,000,000 "
+        "(a lower rate)\n"
+    )
+    assert CliRunner().invoke(main, ["view", str(folder)]).exit_code == 0
+
+
+@pytest.mark.parametrize("command", ["export", "view"])
+def test_export_and_view_refuse_a_damaged_winner_alike(finished, tmp_path, command):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    (folder / "winner.urdf").write_text("")
+    result = CliRunner().invoke(main, [command, str(folder)])
+    assert result.output == (
+        f"Error: {folder}/winner.urdf: expected the URDF a run writes (The XML stream does not contain a valid URDF "
+        "model.)\n"
+    )
+    shutil.copy(finished / "winner.urdf", folder / "winner.urdf")
+    document = _document(folder)
+    document["winner"]["drive"]["armature"] = [1.0]
+    (folder / "result.json").write_text(json.dumps(document))
+    result = CliRunner().invoke(main, [command, str(folder)])
+    assert result.output == (
+        f"Error: {folder}/result.json: winner.drive.armature: expected {document['winner']['dof']} numbers >= 0 "
+        "(one per joint), got [1.0]\n"
+    )
+
+
+def test_export_names_its_rate_exactly(finished, tmp_path):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    result = CliRunner().invoke(main, ["export", str(folder), "--rate", "333.3333"])
+    assert result.exit_code == 0, result.output
+    assert (folder / "trajectory_333.3333hz.csv").is_file()
+
+
+def test_export_and_view_wait_for_a_run_writing_into_the_folder(finished, tmp_path):
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    before = sorted(p.name for p in folder.iterdir())
+    with ResultsFolder(folder):
+        for command, verb in (("export", "export"), ("view", "view")):
+            result = CliRunner().invoke(main, [command, str(folder)])
+            assert result.exit_code == 1
+            assert result.output == (
+                f"Error: {folder}: another run is writing into this results folder (process {os.getpid()}); "
+                f"{verb} it once that run has ended\n"
+            )
+    assert sorted(p.name for p in folder.iterdir()) == before
 
 
 def test_export_of_a_run_without_winner_says_so(finished, tmp_path):

@@ -30,10 +30,16 @@ from scipy.integrate import solve_ivp
 
 from ..robot import RobotModel
 
-__all__ = ["Trajectory", "sample_trajectory", "controller_rate", "joint_trajectory", "FORWARD_ROW_STEP"]
+__all__ = ["Trajectory", "sample_trajectory", "controller_rate", "joint_trajectory", "FORWARD_ROW_STEP", "MAX_ROWS"]
 
 #: Largest time between two rows of a forward-transcription plan [s].
 FORWARD_ROW_STEP = 1e-3
+#: The most rows :func:`controller_rate` makes (1000 s of plan at 1 kHz): each row is an inverse
+#: dynamics call and ~0.5 kB of CSV, so more would take minutes, gigabytes and a controller no use.
+MAX_ROWS = 1_000_000
+#: How far a row may be from the one before under the acceleration contract, relative to the
+#: terms of the step: the rows are chained exactly, so only rounding separates them.
+CONTRACT_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -94,7 +100,8 @@ class Trajectory:
         ValueError
             Naming the file, the row and the column, for a header other than
             ``t,q1..qn,qd1..qdn,qdd1..qddn,tau1..taun,x,y,z``, a cell that is not a finite number,
-            fewer than two rows, or times that do not start at 0 and increase.
+            fewer than two rows, times that do not start at 0 and increase, or a row that does not
+            follow from the one before under the acceleration contract (an edited file).
         """
         with open(path, encoding="utf-8") as f:
             lines = f.read().splitlines()
@@ -128,6 +135,7 @@ class Trajectory:
             row = 2 if table[0, 0] != 0.0 else int(np.argmax(steps <= 0.0)) + 3
             raise ValueError(f"{path}:{row}: column t: expected times from 0 that increase row by row")
         blocks = [table[:, 1 + k * nv : 1 + (k + 1) * nv] for k in range(4)]
+        _check_contract(path, table[:, 0], *blocks[:3])
         return cls(table[:, 0], *blocks, table[:, -3:])
 
     @staticmethod
@@ -142,6 +150,24 @@ class Trajectory:
         s = (times - self.t[i])[:, None]
         qdd = self.qdd[i]
         return self.q[i] + self.qd[i] * s + 0.5 * qdd * s * s, self.qd[i] + qdd * s, qdd
+
+
+def _check_contract(path, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+    """Raise ``ValueError`` naming the first row of the file ``path`` whose ``q`` or ``qd`` do not
+    follow from the row before under the acceleration contract (beyond rounding)."""
+    h = np.diff(t)[:, None]
+    steps = (
+        ("q", q[:-1] + qd[:-1] * h + 0.5 * qdd[:-1] * h * h, q[1:], abs(qd[:-1] * h) + abs(0.5 * qdd[:-1] * h * h)),
+        ("qd", qd[:-1] + qdd[:-1] * h, qd[1:], abs(qdd[:-1] * h)),
+    )
+    for group, expected, got, step in steps:
+        bad = np.abs(got - expected) > CONTRACT_TOLERANCE * (1.0 + np.abs(got) + np.abs(expected) + step)
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise ValueError(
+                f"{path}:{i + 3}: column {group}{j + 1}: expected {expected[i, j]:.10g} (the row before under the "
+                f"acceleration contract), got {got[i, j]:.10g}"
+            )
 
 
 def joint_trajectory(trajectory: Trajectory, joint_names: list[str]) -> dict:
@@ -236,6 +262,11 @@ def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> T
     if not math.isfinite(rate) or rate <= 0.0:
         raise ValueError(f"rate: expected a positive number of rows per second, got {rate}")
     tf = float(trajectory.t[-1])
+    if tf * rate + 2 > MAX_ROWS:
+        raise ValueError(
+            f"rate: {rate:g} Hz over the plan's {tf:g} s makes {tf * rate + 1:.3g} rows; expected at most "
+            f"{MAX_ROWS:,} (a lower rate)"
+        )
     count = math.floor(tf * rate + 1e-9)
     t = np.arange(count + 1) / rate
     if t[-1] < tf - 1e-12:
