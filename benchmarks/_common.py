@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import subprocess
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -25,6 +26,18 @@ def machine() -> dict:
     }
 
 
+def commit() -> str:
+    """The short hash of the code measured, ``+`` if the work tree differs from it."""
+    root = Path(__file__).resolve().parents[1]
+
+    def git(*args: str) -> str:
+        done = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, check=False)
+        return done.stdout.strip() if done.returncode == 0 else ""
+
+    head = git("rev-parse", "--short", "HEAD")
+    return head + ("+" if head and git("status", "--porcelain", "--", "modular_robots") else "") or "unknown"
+
+
 def best_of(repeats: int, work: Callable[[], object]) -> float:
     """Smallest wall time of ``repeats`` runs of ``work`` [s]."""
     times = []
@@ -38,7 +51,7 @@ def best_of(repeats: int, work: Callable[[], object]) -> float:
 def write(name: str, rows: list[dict], extra: dict | None = None) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"{name}.json"
-    payload = {"benchmark": name, "machine": machine(), "rows": rows, **(extra or {})}
+    payload = {"benchmark": name, "commit": commit(), "machine": machine(), "rows": rows, **(extra or {})}
     path.write_text(json.dumps(payload, indent=2) + "\n")
     return path
 

@@ -18,6 +18,12 @@ def _load(name: str) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
+def _measured(doc: dict) -> str:
+    """The line that says which commit's code measured a results file (empty if it does not say)."""
+    commit = doc.get("commit")
+    return f"Measured on commit `{commit}`." if commit else ""
+
+
 def _fmt(value, digits=3) -> str:
     if value is None:
         return "—"
@@ -55,6 +61,7 @@ def _suite_lines() -> list[str]:
         out += [
             f"## Step D on the scenario suite, seed {seed} ({role})",
             "",
+            _measured(suite),
             "Brute force (`none`), the paper's rule as printed (`paper`) and the default (`ratio`), live runs "
             "on 2 cores; iterations saved against brute force; `hindsight`: the floor of any rule that keeps "
             "every candidate ending within 50 % of the winner:",
@@ -96,6 +103,7 @@ def _ipopt_lines() -> list[str]:
     lines = [
         "## Step C beside the peer (CasADi + IPOPT on the same NLP)",
         "",
+        _measured(peer),
         "Each OCP benchmark candidate from the same start by trust-constr and by IPOPT (exact Hessian, "
         "MUMPS, tolerances 1e-6, `acceptable_iter = 0`, adaptive barrier) on the same variables, scaling "
         "and constraint rows (`benchmarks/casadi_peer.py`; equality to the project's rows is tested); "
@@ -183,6 +191,7 @@ def build() -> str:
         lines += [
             "## Step B (feasibility cascade, paper catalogue, 5 kg)",
             "",
+            _measured(feasibility),
             "Seconds are CPU seconds of each test in one process, and wall seconds for the whole cascade.",
             "",
             "| stage | compositions tested | removed | seconds | compositions per s |",
@@ -208,6 +217,7 @@ def build() -> str:
         lines += [
             "## Step C (trajectories)",
             "",
+            _measured(ocp),
             "| transcription | compositions verified (by any of its candidates) | candidates verified | "
             "median s per candidate | median s, 5 DOF | median iterations |",
             "|---|---|---|---|---|---|",
@@ -240,6 +250,7 @@ def build() -> str:
         lines += [
             "## Step D (pruning vs brute force)",
             "",
+            _measured(pruning),
             "| scenario | feasible / candidates | winner | same winner | iterations ratio / none | saving | "
             "wall s ratio / none | saving | pruned |",
             "|---|---|---|---|---|---|---|---|---|",
@@ -276,6 +287,7 @@ def build() -> str:
         lines += [
             "## Headroom for feedback (optimizer margins)",
             "",
+            _measured(margins),
             "Each scenario run with the default margins and at the full limits; the winner tracked at "
             "1 kHz by computed torque on its exported URDF, torques clipped at the URDF's limits "
             "(`modular_robots/ocp/tracking.py`):",
