@@ -159,12 +159,39 @@ def _end_on_signal(signum, frame) -> None:
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
         return
-    if _ending["signum"] is not None:  # the run is already ending: the first signal decides how
+    if _ending["signum"] is None:
+        _ending["signum"] = _first_arrived(signum)
+    elif _ending_underway():  # the run is recording its ending: a second signal would interrupt that
         return
-    signum = _ending["signum"] = _first_arrived(signum)
+    signum = _ending["signum"]  # (again, if its exception was swallowed: the first signal decides)
     if signum == signal.SIGINT:
         raise KeyboardInterrupt
     raise Terminated(signum)
+
+
+def _ending_underway() -> bool:
+    """Whether the exception of the first signal is being handled: an ``except``, ``finally`` or
+    ``__exit__`` up the stack holds it (perhaps as the context of an error of the cleanup). If not,
+    it was swallowed where Python ignores exceptions (a ``__del__``, an at-fork hook) and the run
+    goes on: the next signal raises it again."""
+    exc = sys.exc_info()[1]
+    while exc is not None:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        exc = exc.__context__
+    return False
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Within the block (a fork), the :data:`ENDING` signals wait: a handler run in the parent's
+    after-fork hooks would raise where Python ignores exceptions, and a worker starts with them
+    blocked until it has set its own (:func:`_quiet_worker_signals`)."""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, ENDING)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def available_cores() -> int:
@@ -249,6 +276,7 @@ def _quiet_worker_signals() -> None:
         signal.set_wakeup_fd(-1)
     for signum in ENDING:
         signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM else signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, ENDING)  # blocked by the parent across the fork
 
 
 #: ``prctl``'s request to be sent a signal when the parent ends (Linux, ``<sys/prctl.h>``).
@@ -301,8 +329,9 @@ class ProcessEngine:
         with ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(os.getpid(), context)) as pool:
             pending: deque = deque()
             try:
-                for chunk in _chunks(items, chunksize):
-                    pending.append(pool.submit(_run_in_worker, work, chunk))
+                for index, chunk in enumerate(_chunks(items, chunksize)):
+                    with _signals_held() if index == 0 else contextlib.nullcontext():  # the first starts the workers
+                        pending.append(pool.submit(_run_in_worker, work, chunk))
                     if len(pending) >= self.jobs * self.window:
                         yield from pending.popleft().result()
                 while pending:
@@ -428,7 +457,8 @@ class ProcessExecutor:
                 args=(os.getpid(), child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
                 daemon=True,
             )
-            proc.start()
+            with _signals_held():
+                proc.start()
             child.close()
             self._conns.append(parent)
             self._procs.append(proc)

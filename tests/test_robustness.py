@@ -30,7 +30,7 @@ from modular_robots.__main__ import main as entry_point
 from modular_robots._yamlio import load_yaml
 from modular_robots.cli import main
 from modular_robots.collision import CULL_DISTANCE, CollisionModel, reach_bound
-from modular_robots.execution import available_cores, max_jobs
+from modular_robots.execution import available_cores, max_jobs, terminations_raise
 from modular_robots.folder import LOCK, ResultsFolder
 from modular_robots.pipeline import run_scenario
 from modular_robots.recorder import previous_files
@@ -140,6 +140,21 @@ def test_signals_in_quick_succession_end_the_run_as_the_first_one_says(tmp_path,
     document = _document(out)
     assert document["status"] == "interrupted" and document["message"].startswith(said)
     assert document["counts"]["candidates"] == len(document["candidates"]) == 6
+
+
+def test_later_signals_wait_for_the_ending_unless_its_exception_was_swallowed():
+    """Python ignores an exception raised where a signal lands in a ``__del__`` or an at-fork hook:
+    the run goes on, and must stay interruptible. While the ending is being handled, later signals
+    are ignored; the first decides how the run ends either way."""
+    with terminations_raise():
+        with contextlib.suppress(KeyboardInterrupt):  # swallowed where it was raised
+            signal.raise_signal(signal.SIGINT)
+        with pytest.raises(KeyboardInterrupt):  # the next signal raises it again, as Ctrl-C
+            signal.raise_signal(signal.SIGTERM)
+        try:
+            signal.raise_signal(signal.SIGTERM)
+        except KeyboardInterrupt:
+            signal.raise_signal(signal.SIGHUP)  # the ending is being handled: ignored
 
 
 def _wait_until_delivered(pid: int, signum: int) -> None:
