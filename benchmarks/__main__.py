@@ -1,5 +1,6 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
-runs only those (models, feasibility, ocp, ipopt, pruning, margins, suite). RESULTS.md is rewritten at the end.
+runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite).
+RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -14,7 +15,9 @@ from . import (
     bench_margins,
     bench_models,
     bench_ocp,
+    bench_profile,
     bench_pruning,
+    bench_run,
     bench_suite,
     results_md,
 )
@@ -22,6 +25,8 @@ from . import (
 BENCHES = {
     "models": bench_models,
     "feasibility": bench_feasibility,
+    "run": bench_run,
+    "profile": bench_profile,
     "ocp": bench_ocp,
     "ipopt": bench_ipopt,
     "pruning": bench_pruning,

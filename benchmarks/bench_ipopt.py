@@ -1,7 +1,8 @@
 """The peer, side by side: each OCP benchmark candidate (``bench_ocp``'s set on paper-5kg) solved
 from the same starting point by the project's trust-constr and by CasADi + IPOPT on the same
 nonlinear program (:mod:`benchmarks.casadi_peer`); per candidate the solve times, iterations,
-costs, their ratio, and whether each optimum passes the project's own dense verification.
+costs, their ratio, and whether each optimum passes the project's own dense verification. Beside
+them, trust-constr with the structured Hessian (``ShootingSolver(hessian="structured")``).
 
 IPOPT's time is the solver's alone; its set-up (symbolics, derivative graphs) is reported apart.
 """
@@ -45,6 +46,9 @@ def compare(scenario, verdict) -> dict:
     start = time.perf_counter()
     ours = ShootingSolver(problem).solve()
     ours_s = time.perf_counter() - start
+    start = time.perf_counter()
+    structured = ShootingSolver(problem, hessian="structured").solve()
+    structured_s = time.perf_counter() - start
     peer = solve_with_ipopt(problem)
     ours_v = _verification(problem, ours.final.y) if ours.final is not None else {"passed": False}
     peer_v = _verification(problem, peer.y)
@@ -64,6 +68,9 @@ def compare(scenario, verdict) -> dict:
         "ipopt_status": peer.status,
         "trust_constr_tf_s": ours.final.tf if ours.final is not None else None,
         "ipopt_tf_s": peer.cost,
+        "structured_s": structured_s,
+        "structured_iterations": structured.iterations,
+        "structured_tf_s": structured.final.tf if structured.converged else None,
         "trust_constr_verified": ours_v["passed"],
         "ipopt_verified": peer_v["passed"],
         "trust_constr_verification": ours_v,
@@ -86,6 +93,9 @@ def main() -> None:
         "median_iterations_ratio": float(
             np.median([r["trust_constr_iterations"] / max(r["ipopt_iterations"], 1) for r in rows])
         ),
+        "median_structured_s": statistics.median(r["structured_s"] for r in rows),
+        "structured_iterations": sum(r["structured_iterations"] for r in rows),
+        "trust_constr_iterations": sum(r["trust_constr_iterations"] for r in rows),
         "trust_constr_verified": sum(r["trust_constr_verified"] for r in rows),
         "ipopt_verified": sum(r["ipopt_verified"] for r in rows),
     }

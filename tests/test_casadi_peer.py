@@ -43,6 +43,33 @@ def test_symbolic_rnea_equals_pinocchio_with_armature(scenario, name):
 
 
 @pytest.mark.parametrize("name", COMPOSITIONS)
+def test_rnea_curvature_equals_the_symbolic_hessian(scenario, name):
+    """The solver's second derivatives of RNEA (differences of Pinocchio's first derivatives)
+    against CasADi's exact Hessian of the symbolic Newton-Euler, contracted with a weight."""
+    from modular_robots.ocp.hessian import rnea_curvature
+
+    robot = robot_model(Composition.from_name(name, scenario.catalog), scenario.catalog, 5.0)
+    symbolic = SymbolicRobot(robot)
+    q, v, a, w = (casadi.SX.sym(k, robot.nv) for k in "qvaw")
+    x = casadi.vertcat(q, v, a)
+    hessian = casadi.Function("h", [q, v, a, w], [casadi.hessian(casadi.dot(w, symbolic.rnea(q, v, a)), x)[0]])
+    rng = np.random.default_rng(17)
+    nv = robot.nv
+    points = rng.uniform(robot.lower, robot.upper, size=(4, nv))
+    velocities, accelerations, weights = rng.normal(scale=2.0, size=(3, 4, nv))
+    qq, vv, qv, qa, grad_q, grad_v = rnea_curvature(robot, points, velocities, accelerations, weights)
+    for k in range(4):
+        exact = np.asarray(hessian(points[k], velocities[k], accelerations[k], weights[k]))
+        scale = np.abs(exact).max()
+        for block, rows, cols in ((qq, 0, 0), (vv, 1, 1), (qv, 0, 1), (qa, 0, 2)):
+            reference = exact[rows * nv : (rows + 1) * nv, cols * nv : (cols + 1) * nv]
+            assert np.abs(block[k] - reference).max() <= 1e-6 * scale, (rows, cols)
+        assert np.abs(exact[2 * nv :, 2 * nv :]).max() == 0.0  # RNEA is linear in a
+        dq, dv, _ = pin.computeRNEADerivatives(robot.model, robot.data, points[k], velocities[k], accelerations[k])
+        assert np.allclose(grad_q[k], weights[k] @ dq) and np.allclose(grad_v[k], weights[k] @ dv)
+
+
+@pytest.mark.parametrize("name", COMPOSITIONS)
 def test_the_peer_nlp_has_the_projects_constraint_rows(scenario, name):
     composition = Composition.from_name(name, scenario.catalog)
     verdict = check_composition(composition, scenario.catalog, scenario.task)

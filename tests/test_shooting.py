@@ -275,6 +275,30 @@ def test_constraint_jacobian_matches_central_differences(paper, name, transcript
     assert np.abs(fd[:, 0]).max() > 1e-2  # tf moves the motion
 
 
+@pytest.mark.parametrize("name", [MIXED, REVOLUTE])
+def test_exact_hessian_matches_differences_of_the_exact_jacobian(paper, name):
+    """The Hessian given to trust-constr for every row but the clearance ones equals the central
+    differences of ``J(y)^T lambda`` built from the exact Jacobian, for random multipliers."""
+    problem = paper(name, "inverse", obstacles=True)
+    y = perturbed_guess(problem, seed=5)
+    rows = problem.rows_of("continuity", "path", "midpoint", "torque")
+    clearance = problem.rows_of("clearance")
+    assert len(rows) + len(clearance) == problem.n_constraints and len(clearance)
+    multipliers = np.random.default_rng(3).standard_normal(len(rows))
+    hessian = problem.exact_hessian(y, multipliers, rows).toarray()
+    fd = central_difference(lambda z: problem.evaluate(z).jacobian[rows].T @ multipliers, y)
+    scale = np.abs(fd).max()
+    assert scale > 1.0  # the rows curve: torques in q, positions in (v, u, tf)
+    assert np.abs(hessian - fd).max() < 1e-6 * scale, np.abs(hessian - fd).max() / scale
+    assert np.abs(hessian - hessian.T).max() < 1e-12 * scale
+    # The torque rows alone carry RNEA's curvature in the node configurations (not only in tf).
+    torques = problem.rows_of("torque")
+    curvature = problem.exact_hessian(y, np.ones(len(torques)), torques).toarray()
+    assert np.abs(curvature[1 : 1 + problem.nv, 1 : 1 + problem.nv]).max() > 1e-3
+    with pytest.raises(ValueError, match="the clearance rows have no exact Hessian"):
+        problem.exact_hessian(y, np.ones(len(clearance)), clearance)
+
+
 @pytest.mark.parametrize("transcription", TRANSCRIPTIONS)
 def test_effort_cost_gradient_matches_central_differences(paper, transcription):
     problem = paper(MIXED, transcription, obstacles=True, cost="effort")
@@ -368,6 +392,53 @@ def test_the_margins_give_the_optimum_of_the_reduced_limits(transcription, effor
     assert np.abs(trajectory.tau).max() == pytest.approx(tau, rel=0.02)
     check = verify(problem, outcome.final.y)
     assert check.passed and check.torque_ratio <= effort_margin * (1.0 + 1e-3)
+
+
+def test_superlu_ordering_solves_the_augmented_system_like_scipys_default(paper):
+    """The factorisation trust-constr gets in a solver's thread (symmetric ordering) solves its
+    augmented system ``[[I, A^T], [A, 0]]`` as SciPy's default does; outside it is SciPy's own."""
+    import scipy.sparse.linalg
+
+    from modular_robots.ocp import solver as solver_module
+
+    problem = paper(MIXED, "inverse", obstacles=True)
+    # The Jacobian with a slack column per row, as trust-constr's barrier problem has it.
+    jacobian = problem.evaluate(perturbed_guess(problem, seed=2)).jacobian
+    slacks = np.random.default_rng(5).uniform(0.1, 1.0, jacobian.shape[0])
+    A = scipy.sparse.hstack([jacobian, scipy.sparse.diags(slacks)]).tocsr()
+    m, n = A.shape
+    K = scipy.sparse.block_array([[scipy.sparse.eye_array(n), A.T], [A, None]], format="csc")
+    rhs = np.random.default_rng(4).standard_normal(n + m)
+    reference = scipy.sparse.linalg.spsolve(K, rhs)
+    assert scipy.sparse.linalg.factorized is solver_module._factorized
+    results = {}
+
+    def in_solver_thread():
+        solver_module._solver_thread.active = True
+        results["solver"] = scipy.sparse.linalg.factorized(K)(rhs)
+
+    thread = threading.Thread(target=in_solver_thread)
+    thread.start()
+    thread.join()
+    results["other"] = scipy.sparse.linalg.factorized(K)(rhs)
+    for name, solution in results.items():
+        assert np.abs(solution - reference).max() <= 1e-9 * np.abs(reference).max(), name
+    assert np.abs(K @ results["solver"] - rhs).max() <= 1e-9 * np.abs(rhs).max()
+
+
+@pytest.mark.parametrize("case", list(ROTOR_CASES))
+def test_structured_hessian_reaches_the_analytic_minimum_time(case):
+    """trust-constr with the exact Hessian of the torque and position rows ends at the same
+    analytic optimum as with SR1 (gravity-free rotor, inverse transcription)."""
+    v_max, dq, nodes, expected = ROTOR_CASES[case]
+    settings = OptimizerSettings(nodes=nodes, substeps=2, transcription="inverse", **FULL_LIMITS)
+    problem = ShootingProblem(rotor(I_ROTOR, TAU_ROTOR, v_max), [-0.5], [-0.5 + dq], settings=settings)
+    outcome = ShootingSolver(problem, hessian="structured").solve()
+    assert outcome.status == "optimal", outcome.reason
+    assert outcome.final.tf == pytest.approx(expected, rel=0.01)
+    assert verify(problem, outcome.final.y).passed
+    with pytest.raises(ValueError, match=r"hessian must be one of \['sr1', 'structured'\], got 'bfgs'"):
+        ShootingSolver(problem, hessian="bfgs")
 
 
 @pytest.mark.parametrize("transcription", TRANSCRIPTIONS)

@@ -39,6 +39,7 @@ from ..exceptions import ModularRobotsError
 from ..robot import RobotModel
 from ..scenario import COSTS, OptimizerSettings
 from .guess import detour_path, path_times
+from .hessian import kinematic_hessians, rnea_curvature, torque_hessians
 from .transcription import Propagation, positive_or_one, transcription
 
 __all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
@@ -295,6 +296,10 @@ class ShootingProblem:
             keep_row[rows["clearance"][0, 0]] = False
         new_row = np.cumsum(keep_row) - 1
         self._keep_row = keep_row
+        block_of = np.empty(len(lower), dtype=object)
+        for name in rows:
+            block_of[rows[name].ravel()] = name
+        self._block_of_row = block_of[keep_row]
         self._keep_entry = (entry_cols >= 0) & keep_row[entry_rows]
         kept_rows, kept_cols = entry_rows[self._keep_entry], entry_cols[self._keep_entry]
         self._entry_factor = self.variable_scale[kept_cols] / scale[kept_rows]
@@ -351,6 +356,67 @@ class ShootingProblem:
         evaluation = Evaluation(cost, c, prop, clear, cost_grad, jac)
         self._cache = (key, evaluation)
         return evaluation
+
+    def rows_of(self, *blocks: str) -> np.ndarray:
+        """Indices in the constraint vector of the rows of ``blocks`` (``continuity``, ``path``,
+        ``midpoint``, ``clearance``, ``torque``), in order."""
+        unknown = set(blocks) - set(self._rows)
+        if unknown:
+            raise ValueError(f"unknown constraint blocks {sorted(unknown)}; expected some of {list(self._rows)}")
+        return np.flatnonzero(np.isin(self._block_of_row, blocks))
+
+    @property
+    def has_exact_hessian(self) -> bool:
+        """Whether :meth:`exact_hessian` is available (the inverse transcription)."""
+        return self.transcription.name == "inverse"
+
+    def exact_hessian(self, y: np.ndarray, multipliers: np.ndarray, rows: np.ndarray) -> sparse.csr_matrix:
+        """``sum_i multipliers_i * d2 c_i / dy2`` over the constraint rows ``rows`` (none of them a
+        clearance row) at the scaled point ``y``: continuity, positions along the intervals and
+        their midpoints exactly, torques with RNEA's curvature (:mod:`~modular_robots.ocp.hessian`).
+        """
+        if not self.has_exact_hessian:
+            raise NotImplementedError(f"no exact Hessian for the {self.transcription.name} transcription")
+        if np.any(self._block_of_row[rows] == "clearance"):
+            raise ValueError("the clearance rows have no exact Hessian")
+        N, S, nv = self.intervals, self.substeps, self.nv
+        mu = np.zeros(len(self.row_scale))
+        mu[np.flatnonzero(self._keep_row)[rows]] = multipliers
+        mu /= self.row_scale
+        rows = self._rows
+        cont, path, mid, tau = (mu[rows[k]] for k in ("continuity", "path", "midpoint", "torque"))
+        tf, _, controls = self.unpack(y)
+        prop = self.evaluate(y, derivatives=False).propagation
+        weight_q, weight_v = np.zeros((N, S + 1, nv)), np.zeros((N, S + 1, nv))
+        weight_q[:, S] += cont[:, 0, :nv]
+        weight_v[:, S] += cont[:, 0, nv:]
+        weight_q[:, 1:S] += path[..., :nv]
+        weight_v[:, 1:S] += path[..., nv:]
+        weight_q[:, :S] += 0.5 * mid
+        weight_q[:, 1:] += 0.5 * mid
+        q, v = prop.states[..., :nv].reshape(-1, nv), prop.states[..., nv:].reshape(-1, nv)
+        fractions = np.arange(S + 1) / (N * S)
+        torque_rows = np.any(tau != 0.0)
+        if torque_rows:
+            curvature = rnea_curvature(self.robot, q, v, np.repeat(controls, S + 1, axis=0), tau.reshape(-1, nv))
+            weight_q += curvature[4].reshape(N, S + 1, nv)
+            weight_v += curvature[5].reshape(N, S + 1, nv)
+        local = kinematic_hessians(fractions, tf, controls, weight_q, weight_v)
+        if torque_rows:
+            local += torque_hessians(fractions, tf, controls, prop.states[..., nv:], curvature)
+        # The midpoint's Hermite term is -u (tf / (N S))^2 / 8.
+        f1 = 1.0 / (N * S)
+        u_cols = 2 * nv + np.arange(nv)
+        extra = -0.25 * tf * f1**2 * mid.sum(axis=1)
+        local[:, u_cols, -1] += extra
+        local[:, -1, u_cols] += extra
+        local[:, -1, -1] += -0.25 * f1**2 * np.einsum("mjk,mk->m", mid, controls)
+        r = np.broadcast_to(self._cols[:, :, None], local.shape)
+        c = np.broadcast_to(self._cols[:, None, :], local.shape)
+        keep = (r >= 0) & (c >= 0)
+        r, c = r[keep], c[keep]
+        data = local[keep] * self.variable_scale[r] * self.variable_scale[c]
+        return sparse.csr_matrix((data, (r, c)), shape=(self.n_variables, self.n_variables))
 
     def _between_substeps(self, tf: float, prop: Propagation, derivatives: bool):
         """Every sub-step's midpoint configuration ``(N, S, nv)`` on the cubic Hermite interpolant

@@ -20,12 +20,13 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse.linalg
 from scipy import sparse
 from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
 
 from .shooting import ShootingProblem
 
-__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES"]
+__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS"]
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +40,42 @@ STATUSES = ("optimal", "failed", "stopped")
 COLD_BARRIER = 1e-3
 #: Initial barrier parameter of a warm start (refinement), with a small trust radius.
 WARM_BARRIER = 1e-4
+
+
+#: The constraints' Hessian (:class:`ShootingSolver`'s ``hessian``): ``sr1``, one SR1 estimate
+#: for all rows; ``structured``, the exact second derivatives of every row but the clearance ones
+#: (:meth:`ShootingProblem.exact_hessian`) and SR1 for those. ``structured`` saves about a tenth
+#: of the iterations but costs more per iteration, so ``sr1`` is the default
+#: (``docs/design-notes.md``, ``benchmarks/RESULTS.md``).
+HESSIANS = ("sr1", "structured")
+
+#: How SuperLU factors trust-constr's augmented system ``[[I, A^T], [A, 0]]`` (about 40 % of a
+#: solve): a minimum-degree ordering of ``A^T + A`` with a preference for diagonal pivots suits
+#: that symmetric matrix; SciPy's default (COLAMD, partial pivoting) ignores the symmetry and
+#: makes about twice the work (``docs/design-notes.md``). None: SciPy's default.
+SUPERLU_OPTIONS: dict | None = {
+    "permc_spec": "MMD_AT_PLUS_A",
+    "diag_pivot_thresh": 0.01,
+    "options": {"SymmetricMode": True},
+}
+
+_solver_thread = threading.local()
+
+
+def _factorized(A):
+    """``scipy.sparse.linalg.factorized`` with :data:`SUPERLU_OPTIONS` in a solver's thread."""
+    if getattr(_solver_thread, "active", False) and SUPERLU_OPTIONS is not None:
+        return scipy.sparse.linalg.splu(sparse.csc_matrix(A), **SUPERLU_OPTIONS).solve
+    return _scipy_factorized(A)
+
+
+# trust-constr has no option for its factorisation, and calls this function of the module for
+# every projection; the replacement changes nothing outside a solver's thread.
+_scipy_factorized = getattr(scipy.sparse.linalg.factorized, "__wrapped_by_modular_robots__", None) or (
+    scipy.sparse.linalg.factorized
+)
+_factorized.__wrapped_by_modular_robots__ = _scipy_factorized
+scipy.sparse.linalg.factorized = _factorized
 
 
 @dataclass(frozen=True)
@@ -97,6 +134,9 @@ class ShootingSolver:
         Default to the problem's :class:`~modular_robots.scenario.OptimizerSettings`.
     jacobian
         ``exact`` (the product) or ``finite-difference`` (2-point; for checks and benchmarks).
+    hessian
+        One of :data:`HESSIANS` (``structured`` needs exact Jacobians and the inverse
+        transcription; otherwise ``sr1`` is used).
     iteration_offset
         Added to reported iteration numbers (refinement continues a count).
     """
@@ -111,9 +151,13 @@ class ShootingSolver:
         constraint_tolerance: float | None = None,
         jacobian: str = "exact",
         iteration_offset: int = 0,
+        hessian: str = "sr1",
     ):
         if jacobian not in ("exact", "finite-difference"):
             raise ValueError(f"jacobian must be 'exact' or 'finite-difference', got {jacobian!r}")
+        if hessian not in HESSIANS:
+            raise ValueError(f"hessian must be one of {list(HESSIANS)}, got {hessian!r}")
+        self.hessian = hessian
         s = problem.settings
         self.problem = problem
         self.warm = y0 is not None
@@ -230,6 +274,7 @@ class ShootingSolver:
     def _run(self) -> None:
         problem = self.problem
         self._clock = time.perf_counter()
+        _solver_thread.active = True
         try:
             result = self._minimize()
         except Exception as exc:
@@ -287,13 +332,24 @@ class ShootingSolver:
         def evaluate(y):
             return problem.evaluate(y, derivatives=exact)
 
-        constraint = NonlinearConstraint(
-            lambda y: evaluate(y).constraints,
-            problem.constraint_lower,
-            problem.constraint_upper,
-            jac=problem.constraint_jacobian if exact else "2-point",
-            hess=SR1(),
-        )
+        if exact and problem.has_exact_hessian and self.hessian == "structured":
+            exact_rows = problem.rows_of("continuity", "path", "midpoint", "torque")
+            clearance_rows = problem.rows_of("clearance")
+            constraints = [
+                _rows_constraint(problem, exact_rows, lambda y, v: problem.exact_hessian(y, v, exact_rows)),
+                _rows_constraint(problem, clearance_rows, SR1()),
+            ]
+            constraints = [c for c in constraints if c is not None]
+        else:
+            constraints = [
+                NonlinearConstraint(
+                    lambda y: evaluate(y).constraints,
+                    problem.constraint_lower,
+                    problem.constraint_upper,
+                    jac=problem.constraint_jacobian if exact else "2-point",
+                    hess=SR1(),
+                )
+            ]
         options = {
             "maxiter": self.max_iterations,
             "gtol": self.tolerance,
@@ -317,7 +373,21 @@ class ShootingSolver:
                 jac=problem.cost_gradient if exact else "2-point",
                 hess=objective_hessian,
                 bounds=Bounds(problem.variable_lower, problem.variable_upper),
-                constraints=[constraint],
+                constraints=constraints,
                 callback=self._callback,
                 options=options,
             )
+
+
+def _rows_constraint(problem: ShootingProblem, rows: np.ndarray, hess) -> NonlinearConstraint | None:
+    """The constraint rows ``rows`` of ``problem`` as one trust-constr constraint (exact
+    Jacobian), None if there are none."""
+    if len(rows) == 0:
+        return None
+    return NonlinearConstraint(
+        lambda y: problem.evaluate(y).constraints[rows],
+        problem.constraint_lower[rows],
+        problem.constraint_upper[rows],
+        jac=lambda y: problem.evaluate(y).jacobian[rows],
+        hess=hess,
+    )

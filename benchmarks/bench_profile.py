@@ -1,0 +1,95 @@
+"""Where one step-C solve spends its time: ``cProfile`` of one paper-5kg candidate solved to its
+end, its own time grouped by who does the work (SuperLU inside trust-constr, FCL, the project's
+evaluation, the rest of SciPy/NumPy). Pinocchio's functions are not Python functions that cProfile
+sees: their time counts in the project's evaluation that calls them. The full profile is written beside the JSON as
+``profile.prof`` (not committed; open it with ``python -m pstats`` or snakeviz for a flame view).
+
+cProfile adds a cost per Python call, so the Python groups read a little larger than they run.
+"""
+
+from __future__ import annotations
+
+import cProfile
+import pstats
+import sys
+import threading
+import time
+
+from modular_robots import load_scenario
+from modular_robots.composition import Composition
+from modular_robots.feasibility import check_composition
+from modular_robots.ocp.candidate import composition_problem
+from modular_robots.ocp.solver import ShootingSolver
+
+from ._common import RESULTS, table, write
+from .bench_ocp import SCENARIO
+
+COMPOSITION = "B-J1-L2-J1-L1-J2-L2-J1-L1-E2"
+
+
+def _group(key: tuple[str, int, str]) -> str:
+    filename, _, name = key
+    if "gstrf" in name:
+        return "SuperLU factorisation (trust-constr's augmented system)"
+    if "'solve' of 'SuperLU'" in name:
+        return "SuperLU solves"
+    if "fcl" in name or "fcl" in filename or filename.endswith("modular_robots/collision.py"):
+        return "FCL and clearance"
+    if "modular_robots" in filename:
+        return "the project's evaluation (propagation with Pinocchio, assembly)"
+    return "SciPy trust-constr, NumPy and the rest"
+
+
+def profile_solve(scenario, verdict) -> tuple[dict, pstats.Stats]:
+    """Profile one solve of ``verdict``'s problem; its outcome and the stats."""
+    problem = composition_problem(
+        verdict.composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
+    )
+    solver = ShootingSolver(problem)
+    profiler = cProfile.Profile()
+
+    def profile_solver_thread(*_):  # trust-constr runs in the solver's own thread
+        sys.setprofile(None)
+        profiler.enable()
+
+    threading.setprofile(profile_solver_thread)
+    start = time.perf_counter()
+    try:
+        outcome = solver.solve()
+    finally:
+        threading.setprofile(None)
+    wall = time.perf_counter() - start
+    stats = pstats.Stats(profiler)
+    return {"status": outcome.status, "iterations": outcome.iterations, "wall_s": wall, "tf_s": outcome.final.tf}, stats
+
+
+def main() -> None:
+    scenario = load_scenario(SCENARIO)
+    verdict = check_composition(Composition.from_name(COMPOSITION, scenario.catalog), scenario.catalog, scenario.task)
+    outcome, stats = profile_solve(scenario, verdict)
+    groups: dict[str, float] = {}
+    for key, (_, _, own, _, _) in stats.stats.items():
+        groups[_group(key)] = groups.get(_group(key), 0.0) + own
+    total = sum(groups.values())
+    rows = [
+        {"where": name, "seconds": seconds, "share": seconds / total}
+        for name, seconds in sorted(groups.items(), key=lambda item: -item[1])
+    ]
+    print(table(rows))
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    stats.dump_stats(RESULTS / "profile.prof")
+    write(
+        "profile",
+        rows,
+        {
+            "composition": COMPOSITION,
+            **outcome,
+            "profiled_s": total,
+            "per_iteration_ms": 1e3 * total / max(outcome["iterations"], 1),
+            "note": "own time per group under cProfile, one solve from the default start",
+        },
+    )
+
+
+if __name__ == "__main__":
+    main()
