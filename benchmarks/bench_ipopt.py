@@ -9,6 +9,7 @@ IPOPT's time is the solver's alone; its set-up (symbolics, derivative graphs) is
 
 from __future__ import annotations
 
+import json
 import statistics
 import time
 
@@ -19,7 +20,7 @@ from modular_robots.ocp.candidate import composition_problem
 from modular_robots.ocp.solver import ShootingSolver
 from modular_robots.ocp.verification import verify
 
-from ._common import table, write
+from ._common import RESULTS, table, write
 from .bench_ocp import SCENARIO, benchmark_set
 from .casadi_peer import solve_with_ipopt
 
@@ -78,9 +79,40 @@ def compare(scenario, verdict) -> dict:
     }
 
 
+def unverified_by_trust_constr(scenario, survivors) -> list[dict]:
+    """IPOPT on the compositions none of whose candidates trust-constr verified in the OCP
+    benchmark (``results/ocp.json``), from the fastest boundary pair: whether the peer finds a
+    plan that passes the same verification, or declares the problem (locally) infeasible."""
+    ocp = RESULTS / "ocp.json"
+    if not ocp.is_file():
+        return []
+    failed = set(json.loads(ocp.read_text())["convergence"]["inverse"]["compositions_failed"])
+    rows = []
+    for verdict in survivors:
+        if verdict.composition.name not in failed:
+            continue
+        problem = composition_problem(
+            verdict.composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
+        )
+        peer = solve_with_ipopt(problem)
+        check = _verification(problem, peer.y)
+        rows.append(
+            {
+                "composition": verdict.composition.name,
+                "ipopt_status": peer.status,
+                "ipopt_iterations": peer.iterations,
+                "ipopt_verified": check["passed"],
+                "min_clearance_m": check["min_clearance_m"],
+                "torque_ratio": check["torque_ratio"],
+                "max_defect": check["max_defect"],
+            }
+        )
+    return rows
+
+
 def main() -> None:
     scenario = load_scenario(SCENARIO)
-    _, chosen = benchmark_set(scenario)
+    survivors, chosen = benchmark_set(scenario)
     rows = [compare(scenario, verdict) for verdict in chosen]
     flat = [{k: v for k, v in r.items() if not isinstance(v, dict)} for r in rows]
     print(table(flat))
@@ -100,7 +132,9 @@ def main() -> None:
         "ipopt_verified": sum(r["ipopt_verified"] for r in rows),
     }
     print(summary)
-    path = write("ipopt", rows, {"summary": summary})
+    unverified = unverified_by_trust_constr(scenario, survivors)
+    print(table(unverified))
+    path = write("ipopt", rows, {"summary": summary, "unverified_by_trust_constr": unverified})
     print(f"-> {path}")
 
 

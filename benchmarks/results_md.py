@@ -142,8 +142,84 @@ def _ipopt_lines() -> list[str]:
             f"{_fmt(r['trust_constr_tf_s'], 4)} / {_fmt(r['ipopt_tf_s'], 4)} | "
             f"{r['trust_constr_verified']} / {r['ipopt_verified']} | {'; '.join(miss) or '-'} |"
         )
+    unverified = peer.get("unverified_by_trust_constr")
+    if unverified:
+        infeasible = sum(r["ipopt_status"] == "Infeasible_Problem_Detected" for r in unverified)
+        verified = sum(r["ipopt_verified"] for r in unverified)
+        lines += [
+            "",
+            f"The {len(unverified)} paper-5kg compositions that trust-constr does not verify (step C table), "
+            f"given to IPOPT from their fastest boundary pair: {infeasible} declared locally infeasible, "
+            f"{verified} verified, {len(unverified) - infeasible - verified} ended otherwise or failed verification.",
+            "",
+            "| composition | IPOPT status | iterations | verified | min clearance m | torque ratio | largest defect |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in unverified:
+            lines.append(
+                f"| {r['composition']} | {r['ipopt_status']} | {r['ipopt_iterations']} | {r['ipopt_verified']} | "
+                f"{r['min_clearance_m']:.3f} | {r['torque_ratio']:.3f} | {r['max_defect']:.2g} |"
+            )
     lines.append("")
     return lines
+
+
+def _run_lines() -> list[str]:
+    run = _load("run")
+    if not run:
+        return []
+    r = run["rows"][0]
+    return [
+        "## End to end (`make run` after the install)",
+        "",
+        _measured(run),
+        f"`modular-robots run scenarios/{r['scenario']}.yaml` as a whole process (interpreter start and "
+        f"imports included), median of {r['runs']} runs; machine load average "
+        f"{run['load_average_before']:.1f} before, {run['load_average_after']:.1f} after.",
+        "",
+        "| figure | seconds |",
+        "|---|---|",
+        f"| whole run | {r['run_wall_s']:.1f} |",
+        f"| step B (as the run records it) | {r['step_b_s']:.1f} |",
+        f"| steps C + D | {r['steps_cd_s']:.1f} |",
+        f"| step E (report, plots, viewer) | {r['report_s']:.1f} |",
+        f"| `modular-robots filter` alone (whole process) | {r['filter_wall_s']:.1f} |",
+        "",
+        f"Winner {r['winner']} (tf {r['tf_s']:.4f} s, {r['iterations']} iterations), the same in every run: "
+        f"{'yes' if r['same_winner_every_run'] else 'NO'}.",
+        "",
+    ]
+
+
+def _profile_lines() -> list[str]:
+    after, before = _load("profile"), _load("profile-before")
+    if not after:
+        return []
+    shown = [d for d in (before, after) if d]
+    lines = [
+        "## Where one solve spends its time (cProfile)",
+        "",
+        f"One solve of {after['composition']} from the default start (`benchmarks/bench_profile.py`), own "
+        "time grouped by who does the work"
+        + (", on the commit before the SuperLU ordering and on the current one" if before else "")
+        + ". cProfile adds a cost per Python call; wall times depend on the machine's load.",
+        "",
+        "| where | " + " | ".join(f"commit `{d['commit']}` s (share)" for d in shown) + " |",
+        "|---|" + "---|" * len(shown),
+    ]
+    names = [r["where"] for r in after["rows"]]
+    for name in names:
+        cells = []
+        for d in shown:
+            row = next((r for r in d["rows"] if r["where"] == name), None)
+            cells.append(f"{row['seconds']:.3f} ({row['share'] * 100:.0f} %)" if row else "—")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines.append(
+        "| iterations; ms per iteration | "
+        + " | ".join(f"{d['iterations']}; {d['per_iteration_ms']:.1f}" for d in shown)
+        + " |"
+    )
+    return lines + [""]
 
 
 def build() -> str:
@@ -195,6 +271,7 @@ def build() -> str:
             "different survivors and payload |",
         ]
     lines.append("")
+    lines += _run_lines()
     if feasibility:
         lines += [
             "## Step B (feasibility cascade, paper catalogue, 5 kg)",
@@ -253,6 +330,7 @@ def build() -> str:
                 f"| {r['jacobian']} | {r['status']} | {r['iterations']} | {_fmt(r['seconds'])} | {_fmt(r['tf_s'], 5)} |"
             )
         lines.append("")
+    lines += _profile_lines()
     lines += _ipopt_lines()
     if pruning:
         lines += [
