@@ -303,7 +303,12 @@ class ShootingProblem:
         self._keep_entry = (entry_cols >= 0) & keep_row[entry_rows]
         kept_rows, kept_cols = entry_rows[self._keep_entry], entry_cols[self._keep_entry]
         self._entry_factor = self.variable_scale[kept_cols] / scale[kept_rows]
-        self._jac_rows, self._jac_cols = new_row[kept_rows], kept_cols
+        # The Jacobian's CSR structure, fixed: evaluation only permutes its data into place.
+        jac_rows = new_row[kept_rows]
+        self._csr_order = np.lexsort((kept_cols, jac_rows))
+        self._csr_indices = kept_cols[self._csr_order].astype(np.int32)
+        self._csr_indptr = np.concatenate([[0], np.cumsum(np.bincount(jac_rows, minlength=int(keep_row.sum())))])
+        self._csr_indptr = self._csr_indptr.astype(np.int32)
         self.n_constraints = int(keep_row.sum())
         self.constraint_lower = (lower / scale)[keep_row]
         self.constraint_upper = (upper / scale)[keep_row]
@@ -351,7 +356,8 @@ class ShootingProblem:
             blocks.append(np.full(N * n, -1.0))
             data = np.concatenate([b.ravel() for b in blocks])[self._keep_entry] * self._entry_factor
             jac = sparse.csr_matrix(
-                (data, (self._jac_rows, self._jac_cols)), shape=(self.n_constraints, self.n_variables)
+                (data[self._csr_order], self._csr_indices, self._csr_indptr),
+                shape=(self.n_constraints, self.n_variables),
             )
         evaluation = Evaluation(cost, c, prop, clear, cost_grad, jac)
         self._cache = (key, evaluation)
