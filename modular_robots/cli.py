@@ -528,7 +528,11 @@ def view_command(results: Path, open_page: bool) -> None:
     path = results / write_viewer(results)
     click.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
     if open_page:
-        click.launch(str(path))
+        code = click.launch(str(path))
+        if code != 0:
+            raise click.ClickException(
+                f"could not open a browser (the system's opener exited with {code}); open {path} yourself"
+            )
 
 
 def _written(out: Path) -> str:

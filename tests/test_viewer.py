@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -45,6 +46,20 @@ def test_view_rebuilds_the_same_page_from_the_folder(folder, tmp_path):
     result = CliRunner().invoke(main, ["view", str(copy)])
     assert result.exit_code == 0, result.output
     assert (copy / VIEWER).read_bytes() == (folder / VIEWER).read_bytes()
+
+
+def test_view_open_without_a_browser_says_so_and_fails(folder, tmp_path, monkeypatch):
+    """No browser to open the page (a headless machine: the system's opener is missing): the page
+    is still written, and the command says where it is and exits 1."""
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    monkeypatch.setenv("PATH", str(tmp_path / "no-such-bin"))
+    monkeypatch.delenv("BROWSER", raising=False)
+    result = CliRunner().invoke(main, ["view", str(copy), "--open"])
+    assert result.exit_code == 1, result.output
+    assert result.output.startswith(f"wrote {copy / VIEWER}")
+    assert re.search(r"Error: could not open .*exited with \d+\); open \S*winner\.html yourself\n$", result.output)
+    assert (copy / VIEWER).is_file()
 
 
 def test_the_scene_carries_the_payload_from_start_to_goal(folder):
