@@ -94,7 +94,12 @@ def _one_dof_robot() -> RobotModel:
 
 def exact_vs_finite_difference() -> list[dict]:
     rows = []
-    problem = ShootingProblem(_one_dof_robot(), [0.0], [1.0], settings=OptimizerSettings(nodes=9, substeps=4))
+    problem = ShootingProblem(
+        _one_dof_robot(),
+        [0.0],
+        [1.0],
+        settings=OptimizerSettings(nodes=9, substeps=4, effort_margin=1.0, velocity_margin=1.0),
+    )
     for jacobian in ("exact", "finite-difference"):
         start = time.perf_counter()
         outcome = ShootingSolver(problem, jacobian=jacobian).solve()
