@@ -29,6 +29,7 @@ from scipy.spatial import ConvexHull
 
 from .exceptions import CatalogError
 from .modules import _physical_inertia
+from .urdf_assembly import rpy_from_matrix
 
 __all__ = ["import_timor", "TimorImport", "rpy_from_matrix", "fit_capsule", "shape_points"]
 
@@ -53,15 +54,6 @@ class TimorImport:
 
 
 # -- poses ------------------------------------------------------------------------------------
-def rpy_from_matrix(rotation: np.ndarray) -> tuple[float, float, float]:
-    """URDF roll, pitch, yaw of a rotation matrix (``R = Rz(yaw) Ry(pitch) Rx(roll)``)."""
-    r = np.asarray(rotation, dtype=float)
-    pitch = math.atan2(-r[2, 0], math.hypot(r[0, 0], r[1, 0]))
-    if math.hypot(r[0, 0], r[1, 0]) > 1e-9:
-        return math.atan2(r[2, 1], r[2, 2]), pitch, math.atan2(r[1, 0], r[0, 0])
-    return 0.0, pitch, math.atan2(-r[0, 1], r[1, 1])
-
-
 def _pose(matrix) -> dict:
     m = np.asarray(matrix, dtype=float)
     if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):

@@ -115,3 +115,190 @@ def _covered(points, shapes):
         dist = np.linalg.norm(local - np.column_stack([0 * z, 0 * z, z]), axis=1)
         ok |= dist <= s.radius * (1 + 1e-9) + 1e-12
     return ok
+
+
+# -- frames and dynamics against Timor's rule, written here from the JSON numbers ----------------
+RX_PI = np.diag([1.0, -1.0, -1.0, 1.0])
+GRAVITY = 9.81
+COULOMB_EPS = 0.01  # the smoothing velocity the project documents [rad/s]
+
+
+def _joint_motion(kind, q):
+    out = np.eye(4)
+    if kind == "revolute":
+        out[:2, :2] = [[math.cos(q), -math.sin(q)], [math.sin(q), math.cos(q)]]
+    else:
+        out[2, 3] = q
+    return out
+
+
+def _timor_modules(source):
+    db = json.loads(source.read_text("utf-8"))["modules"]
+    use_names = all(m["header"]["name"].isidentifier() for m in db)
+    return {(m["header"]["name"] if use_names else m["header"]["ID"]): m for m in db}
+
+
+class _Walk:
+    """A frame moving down the chain: world pose ``T``, angular velocity and acceleration, and
+    the acceleration of its origin (gravity as an upward base acceleration)."""
+
+    def __init__(self):
+        self.T = RX_PI.copy()  # Timor's world -> the base's input connector
+        self.omega, self.alpha, self.acc = np.zeros(3), np.zeros(3), np.array([0.0, 0.0, GRAVITY])
+
+    def rigid(self, transform):
+        T = self.T @ transform
+        r = T[:3, 3] - self.T[:3, 3]
+        self.acc = self.acc + np.cross(self.alpha, r) + np.cross(self.omega, np.cross(self.omega, r))
+        self.T = T
+
+
+def _timor_chain(modules, name, q, qd, qdd):
+    """Timor's rule for a serial assembly: world -> Rx(pi) -> inlet^-1 -> (poseParent, joint
+    motion, poseChild)* -> outlet -> Rx(pi) -> next inlet^-1 ...; the TCP is the last free
+    outlet. Alongside, a world-frame Newton-Euler pass (revolute joints) gives motor-side joint
+    torques with the drives' armature (motor inertia * gear ratio^2) and friction
+    (Coulomb * tanh(v / 0.01) + viscous * v)."""
+    walk, bodies, joints = _Walk(), [], []
+    ids = name.split("-")
+    k = 0
+    for position, module_id in enumerate(ids):
+        m = modules[module_id]
+        connectors = [(b["ID"], c) for b in m["bodies"] for c in b["connectors"]]
+        inlet_body, inlet = next((b, c) for b, c in connectors if c["gender"] == "f")
+        outlet = next(c for _, c in connectors if c["gender"] == "m")
+        by_id = {b["ID"]: b for b in m["bodies"]}
+        by_parent = {j["parent"]: j for j in m["joints"]}
+        walk.rigid(np.linalg.inv(np.asarray(inlet["pose"])))
+        current = inlet_body
+        while True:
+            body = by_id[current]
+            R = walk.T[:3, :3]
+            r_com = R @ np.asarray(body["r_com"])
+            a_com = walk.acc + np.cross(walk.alpha, r_com) + np.cross(walk.omega, np.cross(walk.omega, r_com))
+            inertia = R @ np.asarray(body["inertia"]) @ R.T
+            force = body["mass"] * a_com
+            moment = inertia @ walk.alpha + np.cross(walk.omega, inertia @ walk.omega)
+            bodies.append((walk.T[:3, 3] + r_com, force, moment))
+            if current not in by_parent:
+                break
+            j = by_parent[current]
+            walk.rigid(np.asarray(j["poseParent"]))
+            z = walk.T[:3, 2]
+            assert j["type"] == "revolute" or qd[k] == qdd[k] == 0.0
+            walk.alpha = walk.alpha + z * qdd[k] + np.cross(walk.omega, z * qd[k])
+            walk.omega = walk.omega + z * qd[k]
+            drive = (j["motorInertia"] * j["gearRatio"] ** 2, j["frictionCoulomb"], j["frictionViscous"])
+            joints.append((z, walk.T[:3, 3].copy(), drive, len(bodies)))
+            walk.T = walk.T @ _joint_motion(j["type"], q[k])
+            walk.rigid(np.asarray(j["poseChild"]))
+            k += 1
+            current = j["child"]
+        walk.rigid(np.asarray(outlet["pose"]))
+        if position < len(ids) - 1:
+            walk.rigid(RX_PI)
+    tau = np.array(
+        [
+            z @ sum((moment + np.cross(c - origin, force) for c, force, moment in bodies[first:]), np.zeros(3))
+            + armature * qdd[i]
+            + coulomb * math.tanh(qd[i] / COULOMB_EPS)
+            + viscous * qd[i]
+            for i, (z, origin, (armature, coulomb, viscous), first) in enumerate(joints)
+        ]
+    )
+    return walk.T, tau
+
+
+@pytest.mark.parametrize(
+    ("source", "catalog_name", "name"),
+    [
+        (IMPROV_JSON, "improv", "base-PB21-L1-PB21-L2-PB23-L3"),
+        (GEOMETRIC_JSON, "geometric", "base-J2-J2-l_45-J2-l_30-J2-J2-J2-eef"),
+    ],
+)
+def test_tool_pose_follows_timor_composition_rule(source, catalog_name, name):
+    import pinocchio as pin
+
+    from modular_robots.robot import robot_model
+
+    catalog = load_catalog(CATALOGS / f"{catalog_name}.yaml")
+    robot = robot_model(Composition.from_name(name, catalog), catalog)
+    modules = _timor_modules(source)
+    rng = np.random.default_rng(21)
+    assert robot.joint_names == [f"joint_{i + 1}" for i in range(robot.nq)]
+    for _ in range(10):
+        q = rng.uniform(robot.lower, robot.upper)
+        pin.framesForwardKinematics(robot.model, robot.data, q)
+        ours = robot.data.oMf[robot.tool_frame_id].homogeneous
+        theirs, _ = _timor_chain(modules, name, q, np.zeros(robot.nv), np.zeros(robot.nv))
+        assert np.abs(ours - theirs).max() < 1e-9
+
+
+def test_rnea_with_armature_matches_newton_euler_from_the_json():
+    from modular_robots.robot import robot_from_urdf, robot_model
+
+    name = "base-PB21-L1-PB21-L2-PB23-L3"
+    catalog = load_catalog(CATALOGS / "improv.yaml")
+    robot = robot_model(Composition.from_name(name, catalog), catalog)
+    exported = robot_from_urdf(robot.urdf, robot.drive()["armature"])  # what other engines get
+    modules = _timor_modules(IMPROV_JSON)
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        q, qd, qdd = rng.uniform(robot.lower, robot.upper), rng.normal(size=6), rng.normal(size=6)
+        _, tau = _timor_chain(modules, name, q, qd, qdd)
+        assert np.abs(exported.rnea(q, qd, qdd) - tau).max() < 1e-9
+
+
+def test_drive_friction_enters_dynamics_with_exact_derivatives():
+    """IMPROV's drives: at the velocity limit, friction costs PB22's first joint
+    17.89 * 1.2566 + 6.84 = 29.3 N m and its second 13.63 * 1.2566 + 6.91 = 24.0 N m of 75.5;
+    RNEA and ABA stay inverse to each other and their velocity derivatives match differences."""
+    from modular_robots.ocp.transcription import transcription
+    from modular_robots.robot import COULOMB_SMOOTHING, robot_model
+
+    catalog = load_catalog(CATALOGS / "improv.yaml")
+    robot = robot_model(Composition.from_name("base-PB22-L3", catalog), catalog)
+    vmax = robot.velocity_limit
+    assert robot.friction(vmax) == pytest.approx([17.89 * 1.2566 + 6.84, 13.63 * 1.2566 + 6.91], abs=1e-6)
+    assert robot.drive()["coulomb"] == [6.84, 6.91] and robot.drive()["coulomb_smoothing"] == COULOMB_SMOOTHING
+    assert '<dynamics damping="17.89" friction="6.84"/>' in robot.urdf
+    rng = np.random.default_rng(3)
+    q, v, a = rng.uniform(-1, 1, 2), rng.uniform(-0.05, 0.05, 2), rng.normal(size=2)
+    tau = robot.rnea(q, v, a)
+    assert np.abs(robot.aba(q, v, tau) - a).max() < 1e-9
+    h = 1e-7
+    fd_rnea = np.column_stack(
+        [(robot.rnea(q, v + h * e, a) - robot.rnea(q, v - h * e, a)) / (2 * h) for e in np.eye(2)]
+    )
+    fd_aba = np.column_stack(
+        [(robot.aba(q, v + h * e, tau) - robot.aba(q, v - h * e, tau)) / (2 * h) for e in np.eye(2)]
+    )
+    assert np.abs(robot.rnea_derivatives(q, v, a)[1] - fd_rnea).max() < 1e-4 * np.abs(fd_rnea).max()
+    assert np.abs(robot.aba_derivatives(q, v, tau)[1] - fd_aba).max() < 1e-4 * np.abs(fd_aba).max()
+    # the OCP's torques (inverse transcription) carry friction and its exact sensitivity
+    tr = transcription("inverse")
+    x0 = np.concatenate([q, v])[None, :]
+    u = a[None, :]
+    out = tr.propagate(robot, x0, u, 1.0, 4, 2, True)
+    assert np.abs(out.torques[0, 0] - tau).max() < 1e-9
+    for k in range(2, 4):  # d torque / d v0
+        step = np.zeros_like(x0)
+        step[0, k] = h
+        fd = (
+            tr.propagate(robot, x0 + step, u, 1.0, 4, 2, False).torques
+            - tr.propagate(robot, x0 - step, u, 1.0, 4, 2, False).torques
+        ) / (2 * h)
+        assert np.abs(out.torque_sens[..., k] - fd).max() < 1e-4 * max(1.0, np.abs(fd).max())
+
+
+def test_step_b_reach_bound_holds_for_general_modules():
+    from modular_robots.feasibility import max_reach
+    from modular_robots.robot import robot_model
+
+    rng = np.random.default_rng(11)
+    for catalog_name, name in (("improv", "base-PB21-L1-PB21-L2-PB23-L3"), ("geometric", "base-J1-J2-l_45-J1-eef")):
+        catalog = load_catalog(CATALOGS / f"{catalog_name}.yaml")
+        composition = Composition.from_name(name, catalog)
+        robot = robot_model(composition, catalog)
+        reached = max(np.linalg.norm(robot.tool_position(rng.uniform(robot.lower, robot.upper))) for _ in range(500))
+        assert reached <= max_reach(composition, catalog)
