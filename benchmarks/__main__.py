@@ -1,5 +1,5 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
-runs only those (models, feasibility, ocp, ipopt, pruning, margins, suite). RESULTS.md is rewritten at the end.
+runs only those (models, feasibility, ocp, ipopt, pruning, margins, suite, timor). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -16,6 +16,7 @@ from . import (
     bench_ocp,
     bench_pruning,
     bench_suite,
+    bench_timor,
     results_md,
 )
 
@@ -27,6 +28,7 @@ BENCHES = {
     "pruning": bench_pruning,
     "margins": bench_margins,
     "suite": bench_suite,
+    "timor": bench_timor,
 }
 
 with single_threaded_blas():

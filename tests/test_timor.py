@@ -302,3 +302,20 @@ def test_step_b_reach_bound_holds_for_general_modules():
         robot = robot_model(composition, catalog)
         reached = max(np.linalg.norm(robot.tool_position(rng.uniform(robot.lower, robot.upper))) for _ in range(500))
         assert reached <= max_reach(composition, catalog)
+
+
+def test_improv_pick_step_b_keeps_the_assemblies_that_reach_and_hold():
+    """The IMPROV scenario's step B: 17 of its 48 assemblies reach both targets clear of the
+    obstacles and hold 1 kg there (PB23's 40 N m and PB21's 75.5 N m are far from the limit)."""
+    from modular_robots import load_scenario
+    from modular_robots.execution import SerialEngine
+    from modular_robots.feasibility import FeasibilitySummary, filter_compositions
+
+    scenario = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
+    summary = FeasibilitySummary()
+    for verdict in filter_compositions(scenario, engine=SerialEngine()):
+        summary.add(verdict)
+    assert summary.checked == 48
+    assert len(summary.survivors) == 17
+    assert summary.removed["static torque"] == 0
+    assert max(v.figures["torque_ratio"] for v in summary.survivors) < 0.5
