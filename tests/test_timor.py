@@ -289,6 +289,17 @@ def test_drive_friction_enters_dynamics_with_exact_derivatives():
             - tr.propagate(robot, x0 - step, u, 1.0, 4, 2, False).torques
         ) / (2 * h)
         assert np.abs(out.torque_sens[..., k] - fd).max() < 1e-4 * max(1.0, np.abs(fd).max())
+    # forward transcription: ABA of the motor torque less friction, state sensitivities exact
+    forward = transcription("forward")
+    torque = tau[None, :]
+    out = forward.propagate(robot, x0, torque, 0.2, 4, 2, True)
+    for k in range(4):
+        step = np.zeros_like(x0)
+        step[0, k] = h
+        plus = forward.propagate(robot, x0 + step, torque, 0.2, 4, 2, False).states
+        minus = forward.propagate(robot, x0 - step, torque, 0.2, 4, 2, False).states
+        fd = (plus - minus) / (2 * h)
+        assert np.abs(out.state_sens[..., k] - fd).max() < 1e-5 * max(1.0, np.abs(fd).max())
 
 
 def test_step_b_reach_bound_holds_for_general_modules():
@@ -319,3 +330,26 @@ def test_improv_pick_step_b_keeps_the_assemblies_that_reach_and_hold():
     assert len(summary.survivors) == 17
     assert summary.removed["static torque"] == 0
     assert max(v.figures["torque_ratio"] for v in summary.survivors) < 0.5
+
+
+def test_convention_a_is_a_case_of_the_general_model():
+    """The paper catalogue's modules, rewritten as general modules (``from_convention_a``), give
+    the same tool pose, mass matrix and RNEA torques as the convention-A code path."""
+    from modular_robots.catalog import Catalog
+    from modular_robots.modules import AssemblyGrammar, from_convention_a
+    from modular_robots.robot import robot_model
+
+    paper = load_catalog(CATALOGS / "paper.yaml")
+    general = Catalog("paper-general", tuple(from_convention_a(m) for m in paper.modules), AssemblyGrammar((0, 10)))
+    rng = np.random.default_rng(2)
+    for name in ("B-J1-L3-J1-L3-J1-L2-J1-L1-E1", "B-J2-L1-J1-L2-E1", "B-J1-L1-J2-L3-J1-L1-E1"):
+        ids = tuple(name.split("-"))
+        a = robot_model(Composition.from_name(name, paper), paper, payload=5.0)
+        b = robot_model(Composition(ids, a.nq), general, payload=5.0)
+        assert b.nq == a.nq
+        for _ in range(5):
+            q = rng.uniform(a.lower, a.upper)
+            v, acc = rng.normal(size=a.nv), rng.normal(size=a.nv)
+            assert np.abs(a.tool_position(q) - b.tool_position(q)).max() < 1e-12
+            assert np.abs(a.rnea(q, v, acc) - b.rnea(q, v, acc)).max() < 1e-9
+            assert np.abs(a.mass_matrix(q) - b.mass_matrix(q)).max() < 1e-9
