@@ -353,3 +353,30 @@ def test_convention_a_is_a_case_of_the_general_model():
             assert np.abs(a.tool_position(q) - b.tool_position(q)).max() < 1e-12
             assert np.abs(a.rnea(q, v, acc) - b.rnea(q, v, acc)).max() < 1e-9
             assert np.abs(a.mass_matrix(q) - b.mass_matrix(q)).max() < 1e-9
+
+
+def test_cli_counts_improv_and_imports_with_overrides_named(tmp_path):
+    from click.testing import CliRunner
+
+    from modular_robots.cli import main
+
+    result = CliRunner().invoke(main, ["enumerate", str(CATALOGS / "improv.yaml"), "--count"])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines() == [
+        "dof  compositions",
+        "0    4",
+        "2    16",
+        "4    25600",
+        "6    40960000",
+        "all  40985620",
+    ]
+    out = tmp_path / "geometric.yaml"
+    overrides = CATALOGS / "timor" / "geometric.overrides.yaml"
+    result = CliRunner().invoke(
+        main, ["import-timor", str(GEOMETRIC_JSON), "--overrides", str(overrides), "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "override: module J1, joint Prismatic: limits {'velocity': 0.5, 'effort': 1000.0}" in result.output
+    assert out.read_text("utf-8") == (CATALOGS / "geometric.yaml").read_text("utf-8")
+    result = CliRunner().invoke(main, ["import-timor", str(GEOMETRIC_JSON), "-o", str(out)])
+    assert result.exit_code != 0 and "Prismatic.limits.velocity: [inf] is not finite" in result.output
