@@ -1,5 +1,5 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
-runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite).
+runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite, timor).
 RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
@@ -19,6 +19,7 @@ from . import (
     bench_pruning,
     bench_run,
     bench_suite,
+    bench_timor,
     results_md,
 )
 
@@ -32,6 +33,7 @@ BENCHES = {
     "pruning": bench_pruning,
     "margins": bench_margins,
     "suite": bench_suite,
+    "timor": bench_timor,
 }
 
 with single_threaded_blas():

@@ -390,7 +390,45 @@ def build() -> str:
                 f"{r['tracking_max_deviation_mm']:.3g} | {r['tracking_velocity_ratio']:.4f} |"
             )
         lines.append("")
+    lines += _timor_lines()
     return "\n".join(lines + _history())
+
+
+def _timor_lines() -> list[str]:
+    """Steps A and B on Timor's IMPROV modules (``bench_timor.py``)."""
+    doc = _load("timor")
+    if not doc:
+        return []
+    lines = [
+        "## A real module set: IMPROV (Timor), steps A and B",
+        "",
+        _measured(doc),
+        "Step A counts by dynamic programming and lists as a stream; step B runs on the Science Robotics 2019 "
+        "space (32,768 six-joint assemblies) under the task of `scenarios/improv-pick.yaml`:",
+        "",
+        "| step A | assemblies | seconds |",
+        "|---|---|---|",
+    ]
+    lines += [f"| {r['what']} | {r['assemblies']:,} | {_fmt(r['seconds'])} |" for r in doc["step_a"]]
+    lines += [
+        "",
+        f"Listing peak memory (tracemalloc): {doc['listing_peak_bytes'] / 1e6:.3f} MB.",
+        "",
+        "| step B | tested | removed | CPU s |",
+        "|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['stage']} | {_fmt(r['compositions_tested'])} | {r['removed']} | {_fmt(r['cpu_seconds'])} |"
+        for r in doc["rows"]
+    ]
+    lines += [
+        "",
+        f"The cascade row's seconds are wall seconds. {doc['survivors']:,} survivors; "
+        f"{doc['compositions_per_second_step_b']:.0f} compositions/s on {doc['machine']['cpus']} cores (shared with "
+        "other work).",
+        "",
+    ]
+    return lines
 
 
 def main() -> None:

@@ -40,6 +40,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
         filter_compositions,
     )
     from .folder import ResultsFolder
+    from .modules import GeneralModule
     from .ocp import (
         BoundaryPair,
         Candidate,
@@ -63,6 +64,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
     from .report import export_controller_rate, read_winner
     from .robot import Primitive, RobotModel, robot_model
     from .scenario import OptimizerSettings, PruningSettings, Scenario, SphereObstacle, Task, load_scenario
+    from .timor import import_timor
     from .urdf import composition_urdf, write_urdf
     from .viewer import write_viewer
 
@@ -87,6 +89,7 @@ __all__ = [
     "Terminated",
     "FeasibilitySettings",
     "FeasibilitySummary",
+    "GeneralModule",
     "Grammar",
     "InProcessExecutor",
     "InfeasibleError",
@@ -118,6 +121,7 @@ __all__ = [
     "Verification",
     "candidate_specs",
     "check_composition",
+    "import_timor",
     "closest_approach",
     "composition_space",
     "export_controller_rate",
@@ -163,6 +167,7 @@ _PUBLIC = {
     "Terminated": "exceptions",
     "FeasibilitySettings": "feasibility",
     "FeasibilitySummary": "feasibility",
+    "GeneralModule": "modules",
     "Grammar": "catalog",
     "InProcessExecutor": "execution",
     "InfeasibleError": "exceptions",
@@ -194,6 +199,7 @@ _PUBLIC = {
     "Verification": "ocp",
     "candidate_specs": "pipeline",
     "check_composition": "feasibility",
+    "import_timor": "timor",
     "closest_approach": "collision",
     "composition_space": "feasibility",
     "export_controller_rate": "report",

@@ -19,6 +19,14 @@ from typing import Literal
 
 from ._yamlio import Fields, load_yaml
 from .exceptions import CatalogError, shorten
+from .modules import (
+    AssemblyGrammar,
+    GeneralModule,
+    _physical_inertia,
+    check_grammar_ids,
+    read_assembly_grammar,
+    read_general_module,
+)
 
 __all__ = ["JointLimits", "Module", "Grammar", "Catalog", "load_catalog"]
 
@@ -81,12 +89,22 @@ class Grammar:
 
 @dataclass(frozen=True)
 class Catalog:
-    """A named set of modules and their grammar. Hashable, so models can be cached on it."""
+    """A named set of modules and their grammar. Hashable, so models can be cached on it.
+
+    Either a convention-A catalogue (:class:`Module`, :class:`Grammar`) or a general one
+    (:class:`~modular_robots.modules.GeneralModule`,
+    :class:`~modular_robots.modules.AssemblyGrammar`; ``general`` is True)."""
 
     name: str
-    modules: tuple[Module, ...]
-    grammar: Grammar
+    modules: tuple[Module, ...] | tuple[GeneralModule, ...]
+    grammar: Grammar | AssemblyGrammar
     source: str = field(default="", compare=False)
+    notes: tuple[str, ...] = field(default=(), compare=False)
+
+    @property
+    def general(self) -> bool:
+        """True for a catalogue in the general module model (``format: general``)."""
+        return isinstance(self.grammar, AssemblyGrammar)
 
     @cached_property
     def _by_id(self) -> dict[str, Module]:
@@ -126,6 +144,9 @@ def load_catalog(path: str | Path) -> Catalog:
 def catalog_from_fields(top: Fields) -> Catalog:
     """:func:`load_catalog` on an already parsed file."""
     top = top.reporting(CatalogError)
+    if top.raw("format", "convention_a") == "general":
+        return _general_catalog(top)
+    top.check("format", top.raw("format", "convention_a") == "convention_a", "expected convention_a or general")
     name = top.string("name")
     top.string("description", default="")
     modules: list[Module] = []
@@ -145,6 +166,25 @@ def catalog_from_fields(top: Fields) -> Catalog:
     if wants_links and not any(m.kind == "link" for m in modules):
         raise top.fail("grammar", "the grammar asks for links but no module is of kind 'link'")
     return Catalog(name=name, modules=tuple(modules), grammar=grammar, source=str(top.path))
+
+
+def _general_catalog(top: Fields) -> Catalog:
+    name = top.string("name")
+    top.string("description", default="")
+    notes = top.raw("notes", [])
+    top.check("notes", isinstance(notes, list) and all(isinstance(n, str) for n in notes), "expected a list of strings")
+    modules: dict[str, GeneralModule] = {}
+    for fields in top.mappings("modules"):
+        module = read_general_module(fields)
+        fields.check("id", module.id not in modules, f"duplicate module id {module.id!r}")
+        modules[module.id] = module
+    grammar = read_assembly_grammar(top.mapping("grammar"))
+    check_grammar_ids(top, grammar, modules)
+    top.done()
+    for kind in ("base", "effector"):
+        if not any(m.kind == kind for m in modules.values()):
+            raise top.fail("modules", f"expected at least one module of kind {kind!r}")
+    return Catalog(name, tuple(modules.values()), grammar, str(top.path), tuple(notes))
 
 
 #: Bounds on a module's numbers (SI units), beyond which no module of a buildable robot lies and
@@ -264,30 +304,6 @@ def _read_inertia(f: Fields, mass: float, diameter: float, length: float):
         f"(no moment above the sum of the other two), got {list(moments)}",
     )
     return com, moments
-
-
-def _physical_inertia(moments: tuple[float, ...]) -> bool:
-    """True for a rotational inertia a rigid body can have: positive definite, and its largest
-    principal moment at most the sum of the other two (half the trace)."""
-    ixx, iyy, izz, ixy, ixz, iyz = moments
-    det = ixx * (iyy * izz - iyz * iyz) - ixy * (ixy * izz - iyz * ixz) + ixz * (ixy * iyz - iyy * ixz)
-    if not (ixx > 0 and ixx * iyy - ixy * ixy > 0 and det > 0):
-        return False
-    return _largest_eigenvalue(moments) <= 0.5 * (ixx + iyy + izz) * (1.0 + 1e-9)
-
-
-def _largest_eigenvalue(moments: tuple[float, ...]) -> float:
-    """The largest eigenvalue of the symmetric 3 x 3 matrix ``moments`` (closed form)."""
-    ixx, iyy, izz, ixy, ixz, iyz = moments
-    off = ixy * ixy + ixz * ixz + iyz * iyz
-    if off == 0.0:
-        return max(ixx, iyy, izz)
-    q = (ixx + iyy + izz) / 3.0
-    p = math.sqrt(((ixx - q) ** 2 + (iyy - q) ** 2 + (izz - q) ** 2 + 2.0 * off) / 6.0)
-    a, b, c = (ixx - q) / p, (iyy - q) / p, (izz - q) / p
-    d, e, g = ixy / p, ixz / p, iyz / p
-    r = 0.5 * (a * (b * c - g * g) - d * (d * c - g * e) + e * (d * g - b * e))
-    return q + 2.0 * p * math.cos(math.acos(max(-1.0, min(1.0, r))) / 3.0)
 
 
 def _read_limits(f: Fields, joint: str) -> JointLimits:

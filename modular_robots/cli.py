@@ -33,6 +33,7 @@ from .ocp.candidate import BoundaryPair
 from .pipeline import optimize_composition, run_scenario, with_pruning
 from .report import RESULT, export_controller_rate
 from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
+from .timor import import_timor
 from .urdf import write_urdf
 from .viewer import write_viewer
 
@@ -330,6 +331,27 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
     chain = Composition.from_name(composition, catalog)
     write_urdf(output, chain, catalog, payload)
     click.echo(f"wrote {output} ({chain.dof} joints, payload {payload:g} kg)")
+
+
+@main.command("import-timor")
+@click.argument("modules_json", type=_existing_file, metavar="MODULES_JSON")
+@click.option(
+    "--overrides",
+    type=_existing_file,
+    default=None,
+    help="YAML of decisions: name, description, grammar, modules to remove, inertia and limit overrides.",
+)
+@click.option("-o", "--output", type=str, callback=_file_name("catalogue"), required=True, help="Catalogue to write.")
+@_user_errors
+def import_timor_command(modules_json: Path, overrides: Path | None, output: Path) -> None:
+    """Convert a Timor module database (modules.json) to a general catalogue YAML."""
+    result = import_timor(modules_json, overrides)
+    atomic_write(output, result.yaml())
+    for line in result.overrides:
+        click.echo(f"override: {line}")
+    for line in result.collision:
+        click.echo(f"collision: {line}")
+    click.echo(f"wrote {output} ({len(result.data['modules'])} modules)")
 
 
 @main.command("filter")

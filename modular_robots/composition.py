@@ -15,6 +15,7 @@ import itertools
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from .assembly import assembly_error, count_assemblies, enumerate_assemblies
 from .catalog import Catalog, Module
 from .exceptions import CatalogError, CompositionError, shorten
 
@@ -55,7 +56,12 @@ class Composition:
                 modules.append(catalog.module(module_id))
             except CatalogError as exc:
                 raise CompositionError(f"composition {shorten(name)}, position {position + 1}: {exc}") from None
-        _check_grammar(name, modules, catalog)
+        if catalog.general:
+            problem = assembly_error(catalog, ids)
+            if problem:
+                raise CompositionError(f"composition {shorten(name)}: {problem} (catalogue {shorten(catalog.name)})")
+        else:
+            _check_grammar(name, modules, catalog)
         return cls(ids, sum(m.dof for m in modules))
 
 
@@ -105,6 +111,11 @@ def enumerate_compositions(catalog: Catalog, dof: int | None = None) -> Iterator
     dof
         Only compositions with exactly this many DOF (default: the grammar's whole range).
     """
+    if catalog.general:
+        _dof_range(catalog, dof)  # the same error for a DOF out of range
+        for ids in enumerate_assemblies(catalog, dof):
+            yield Composition(ids, sum(catalog.module(i).dof for i in ids))
+        return
     g = catalog.grammar
     joints = catalog.of_kind("joint")
     blocks = [(j.id, *run) for j in joints for run in _link_runs(catalog.of_kind("link"), g.links_after_joint)]
@@ -123,7 +134,10 @@ def enumerate_compositions(catalog: Catalog, dof: int | None = None) -> Iterator
 
 def count_compositions(catalog: Catalog, dof: int | None = None) -> dict[int, int]:
     """Number of compositions per DOF (only ``dof`` if given), in closed form: nothing is
-    enumerated."""
+    enumerated (general catalogues: by dynamic programming over connector compatibility)."""
+    if catalog.general:
+        _dof_range(catalog, dof)
+        return count_assemblies(catalog, dof)
     g = catalog.grammar
     n_links = len(catalog.of_kind("link"))
     per_run = sum(n_links**k for k in range(g.links_after_joint[0], g.links_after_joint[1] + 1))

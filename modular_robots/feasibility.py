@@ -37,6 +37,7 @@ from .execution import Engine, make_engine
 from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
 from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
+from .urdf_assembly import assembly_reach
 
 __all__ = [
     "FeasibilityTest",
@@ -150,6 +151,8 @@ def _rx(angle: float) -> np.ndarray:
 
 def max_reach(composition: Composition, catalog: Catalog) -> float:
     """Upper bound on the tool's distance from the base origin [m], from catalogue numbers."""
+    if catalog.general:
+        return assembly_reach(composition, catalog)
     total, _, offset, strokes = _reach_along(catalog, composition.modules)
     return total + _piece_reach(offset, strokes)
 

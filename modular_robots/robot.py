@@ -17,8 +17,13 @@ import pinocchio as pin
 from .catalog import Catalog
 from .composition import Composition
 from .urdf import PAYLOAD_RADIUS, composition_urdf, link_name
+from .urdf_assembly import assembly_shapes
 
-__all__ = ["Primitive", "RobotModel", "robot_from_urdf", "robot_model"]
+__all__ = ["Primitive", "RobotModel", "robot_from_urdf", "robot_model", "COULOMB_SMOOTHING"]
+
+#: Velocity scale of the smooth sign in Coulomb friction, ``coulomb * tanh(v / eps)``
+#: [rad/s | m/s]: above 3 eps (0.03 rad/s) the friction is within 0.5 % of its full value.
+COULOMB_SMOOTHING = 0.01
 
 
 @dataclass(frozen=True)
@@ -75,6 +80,8 @@ class RobotModel:
             if not model.existFrame(p.frame):
                 raise ValueError(f"primitive {p.name!r}: robot {self.name!r} has no frame {p.frame!r}")
         self._primitive_frames = [int(model.getFrameId(p.frame)) for p in self.primitives]
+        #: Whether the joints have friction (``model.damping``: viscous, ``model.friction``: Coulomb).
+        self.has_friction = bool(np.any(model.damping != 0.0) or np.any(model.friction != 0.0))
 
     # -- sizes and limits --------------------------------------------------------------------
     @property
@@ -130,16 +137,27 @@ class RobotModel:
 
     def drive(self) -> dict:
         """What the URDF cannot say about the drives, per joint in ``q`` order: ``armature``
-        (reflected rotor inertia [kg m^2 | kg]) and Coulomb and viscous friction (none is modelled
-        yet, so 0); ``trajectory.csv``'s torques include them."""
-        nv = self.nv
+        (reflected rotor inertia [kg m^2 | kg]), Coulomb [N m | N] and viscous [N m s | N s]
+        friction (also in the URDF's ``<dynamics>``) and the smoothing velocity of the Coulomb
+        term (:data:`COULOMB_SMOOTHING`, None without friction); ``trajectory.csv``'s torques
+        include them."""
         return {
             "joints": self.joint_names,
             "armature": [float(a) for a in self.model.armature],
-            "coulomb": [0.0] * nv,
-            "viscous": [0.0] * nv,
-            "coulomb_smoothing": None,
+            "coulomb": [float(c) for c in self.model.friction],
+            "viscous": [float(c) for c in self.model.damping],
+            "coulomb_smoothing": COULOMB_SMOOTHING if self.has_friction else None,
         }
+
+    def friction(self, v) -> np.ndarray:
+        """Joint friction torque [N m | N] at velocity ``v``: ``viscous * v + coulomb * tanh(v / eps)``."""
+        v = np.asarray(v, dtype=float)
+        return self.model.damping * v + self.model.friction * np.tanh(v / COULOMB_SMOOTHING)
+
+    def friction_derivative(self, v) -> np.ndarray:
+        """``d friction / d v`` (the diagonal), exact."""
+        t = np.tanh(np.asarray(v, dtype=float) / COULOMB_SMOOTHING)
+        return self.model.damping + self.model.friction * (1.0 - t * t) / COULOMB_SMOOTHING
 
     # -- kinematics -----------------------------------------------------------------------
     def tool_position(self, q: np.ndarray) -> np.ndarray:
@@ -181,24 +199,36 @@ class RobotModel:
 
     # -- dynamics ---------------------------------------------------------------------------
     def rnea(self, q, v, a) -> np.ndarray:
-        """Inverse dynamics: joint torques/forces [N m or N] for ``(q, v, a)``, gravity included."""
-        return pin.rnea(self.model, self.data, q, v, a).copy()
+        """Inverse dynamics: motor-side joint torques/forces [N m or N] for ``(q, v, a)``, gravity,
+        armature and friction included."""
+        tau = pin.rnea(self.model, self.data, q, v, a).copy()
+        return tau + self.friction(v) if self.has_friction else tau
 
     def aba(self, q, v, tau) -> np.ndarray:
-        """Forward dynamics: joint accelerations for ``(q, v, tau)``."""
+        """Forward dynamics: joint accelerations for motor torques ``tau`` at ``(q, v)``."""
+        if self.has_friction:
+            tau = np.asarray(tau, dtype=float) - self.friction(v)
         return pin.aba(self.model, self.data, q, v, tau).copy()
 
     def rnea_derivatives(self, q, v, a) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(dtau/dq, dtau/dv, dtau/da = M)`` at ``(q, v, a)``."""
         dq, dv, da = pin.computeRNEADerivatives(self.model, self.data, q, v, a)
         da = np.triu(da) + np.triu(da, 1).T
-        return dq.copy(), dv.copy(), da
+        dv = dv.copy()
+        if self.has_friction:
+            dv[np.diag_indices_from(dv)] += self.friction_derivative(v)
+        return dq.copy(), dv, da
 
     def aba_derivatives(self, q, v, tau) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(dqdd/dq, dqdd/dv, dqdd/dtau = M^-1)`` at ``(q, v, tau)``."""
+        if self.has_friction:
+            tau = np.asarray(tau, dtype=float) - self.friction(v)
         dq, dv, dtau = pin.computeABADerivatives(self.model, self.data, q, v, tau)
         dtau = np.triu(dtau) + np.triu(dtau, 1).T
-        return dq.copy(), dv.copy(), dtau
+        dv = dv.copy()
+        if self.has_friction:
+            dv -= dtau * self.friction_derivative(v)[None, :]
+        return dq.copy(), dv, dtau
 
     def gravity(self, q) -> np.ndarray:
         """Static joint torques/forces that hold ``q`` against gravity (payload included)."""
@@ -219,6 +249,11 @@ class RobotModel:
 def composition_primitives(composition: Composition, catalog: Catalog) -> list[Primitive]:
     """Collision primitives of a composition: each module's catalogue shape, plus the payload."""
     out = []
+    if catalog.general:
+        for frame, radius, length, index in assembly_shapes(composition, catalog):
+            out.append(Primitive(frame, frame, radius, length, -length / 2, index))
+        out.append(Primitive("payload", "payload", PAYLOAD_RADIUS, 0.0, 0.0, len(composition.modules)))
+        return out
     for index, module_id in enumerate(composition.modules):
         module = catalog.module(module_id)
         frame = link_name(index, module)
@@ -245,6 +280,10 @@ def robot_model(composition: Composition, catalog: Catalog, payload: float = 0.0
 @lru_cache(maxsize=256)
 def _pinocchio_model(composition: Composition, catalog: Catalog, payload: float) -> tuple[pin.Model, str]:
     model = pin.buildModelFromXML(composition_urdf(composition, catalog, payload, collision=False))
+    if catalog.general:
+        joints = [j for m in composition.modules for j in catalog.module(m).joints]
+        model.armature = np.array([j.drive.armature for j in joints], dtype=float)
+        return model, composition_urdf(composition, catalog, payload)
     joint_modules = [catalog.module(m) for m in composition.modules if catalog.module(m).dof]
     model.armature = np.array([m.armature for m in joint_modules], dtype=float)
     return model, composition_urdf(composition, catalog, payload)

@@ -2,7 +2,8 @@
 
 Frames: ``base_link``, one URDF link per module named ``m<i>_<ID>`` (``i`` = position in the
 chain, base = 0), ``tool0`` at the effector's output port and a fixed ``payload`` body there.
-Movable joints are ``joint_1`` … ``joint_n``. A module's URDF link frame is its body frame
+Movable joints are ``joint_1`` … ``joint_n``. (General catalogues: see
+:mod:`~modular_robots.urdf_assembly`.) A module's URDF link frame is its body frame
 (input · Rx(twist_in) · M(q)), so the mount of module i+1 on module i is
 ``Tz(length_i) · Rx(twist_out_i + twist_in_{i+1})``.
 """
@@ -17,6 +18,7 @@ from string import Template
 from .catalog import Catalog, Module
 from .composition import Composition
 from .folder import atomic_write
+from .urdf_assembly import assembly_urdf
 
 __all__ = ["composition_urdf", "write_urdf", "PAYLOAD_RADIUS", "link_name"]
 
@@ -93,6 +95,9 @@ def composition_urdf(composition: Composition, catalog: Catalog, payload: float 
         Include the collision shapes. A Pinocchio model does not read them, and it is built a
         fifth faster from a text without them.
     """
+    if catalog.general:
+        body = assembly_urdf(composition, catalog, _payload(payload, collision), collision)
+        return _fill("robot", name=composition.name, catalog=catalog.name, body=body)
     parts: list[str] = []
     parent: Module | None = None
     joint_index = 0

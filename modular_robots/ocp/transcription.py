@@ -85,7 +85,7 @@ class ForwardDynamics(Transcription):
         return positive_or_one(robot.effort_limit)
 
     def initial_controls(self, robot, q, v, a):
-        return np.array([pin.rnea(robot.model, robot.data, qi, vi, ai) for qi, vi, ai in zip(q, v, a)])
+        return np.array([robot.rnea(qi, vi, ai) for qi, vi, ai in zip(q, v, a)])
 
     def torque(self, robot, node, u, s):
         return np.asarray(u, dtype=float)
@@ -136,6 +136,8 @@ class ForwardDynamics(Transcription):
         nv = n // 2
         xdot = np.empty_like(x)
         xdot[:, :nv] = x[:, nv:]
+        if robot.has_friction:  # the joints get the motor torque less friction
+            u = u - robot.friction(x[:, nv:])
         if not derivatives:
             for i in range(n_int):
                 xdot[i, nv:] = pin.aba(model, data, x[i, :nv], x[i, nv:], u[i])
@@ -147,6 +149,8 @@ class ForwardDynamics(Transcription):
             dq[i], dv[i], m = pin.computeABADerivatives(model, data, x[i, :nv], x[i, nv:], u[i])
             minv[i] = np.triu(m) + np.triu(m, 1).T
             xdot[i, nv:] = data.ddq
+        if robot.has_friction:
+            dv -= minv * robot.friction_derivative(x[:, nv:])[:, None, :]
         K = np.empty_like(X)
         K[:, :nv] = X[:, nv:]
         K[:, nv:] = dq @ X[:, :nv] + dv @ X[:, nv:]
@@ -178,7 +182,7 @@ class InverseDynamics(Transcription):
         nv = robot.nv
         q = node[:nv] + node[nv:] * s + 0.5 * u * s * s
         v = node[nv:] + u * s
-        return pin.rnea(robot.model, robot.data, q, v, u).copy()
+        return robot.rnea(q, v, u)
 
     def propagate(self, robot, x0, u, tf, intervals, substeps, derivatives):
         n_int, n = x0.shape
@@ -197,6 +201,8 @@ class InverseDynamics(Transcription):
             for i in range(n_int):
                 for j in range(substeps + 1):
                     torques[i, j] = pin.rnea(model, data, q[i, j], v[i, j], u[i])
+            if robot.has_friction:
+                torques += robot.friction(v)
             return Propagation(states, torques)
         eye = np.eye(nv)
         sens = np.zeros((n_int, substeps + 1, n, p))
@@ -217,6 +223,9 @@ class InverseDynamics(Transcription):
                 torques[i, j] = data.tau
         torque_sens = dq @ sens[:, :, :nv] + dv @ sens[:, :, nv:]
         torque_sens[:, :, :, n : n + nv] += mass
+        if robot.has_friction:  # motor torque: friction at the sub-step's velocity
+            torques += robot.friction(v)
+            torque_sens += robot.friction_derivative(v)[..., None] * sens[:, :, nv:]
         return Propagation(states, torques, sens, torque_sens)
 
 

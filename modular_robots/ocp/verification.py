@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import pinocchio as pin
 from scipy.integrate import solve_ivp
 
 from .shooting import ShootingProblem
@@ -106,7 +105,7 @@ def _dynamics(problem: ShootingProblem, node: np.ndarray, u: np.ndarray):
 
     def rhs(s, state):
         tau = tr.torque(robot, node, u, s)
-        return np.concatenate([state[nv:], pin.aba(robot.model, robot.data, state[:nv], state[nv:], tau)])
+        return np.concatenate([state[nv:], robot.aba(state[:nv], state[nv:], tau)])
 
     return rhs
 
