@@ -159,6 +159,11 @@ class RobotModel:
         t = np.tanh(np.asarray(v, dtype=float) / COULOMB_SMOOTHING)
         return self.model.damping + self.model.friction * (1.0 - t * t) / COULOMB_SMOOTHING
 
+    def friction_second_derivative(self, v) -> np.ndarray:
+        """``d2 friction / d v2`` (the diagonal), exact."""
+        t = np.tanh(np.asarray(v, dtype=float) / COULOMB_SMOOTHING)
+        return self.model.friction * (-2.0 * t * (1.0 - t * t)) / COULOMB_SMOOTHING**2
+
     # -- kinematics -----------------------------------------------------------------------
     def tool_position(self, q: np.ndarray) -> np.ndarray:
         """Position of the tool point in the base frame [m]."""

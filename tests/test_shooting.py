@@ -45,7 +45,7 @@ from modular_robots.pipeline import candidate_specs, optimize_composition
 from modular_robots.robot import Primitive, RobotModel
 from modular_robots.scenario import OptimizerSettings, SphereObstacle, load_scenario
 
-from .conftest import PAPER_5KG
+from .conftest import PAPER_5KG, ROOT
 
 # A revolute + prismatic composition (J2 in the middle) and a revolute-only one, both feasible
 # for the 5 kg paper task. The revolute-only one is chosen so that the forward transcription's
@@ -297,6 +297,30 @@ def test_exact_hessian_matches_differences_of_the_exact_jacobian(paper, name):
     assert np.abs(curvature[1 : 1 + problem.nv, 1 : 1 + problem.nv]).max() > 1e-3
     with pytest.raises(ValueError, match="the clearance rows have no exact Hessian"):
         problem.exact_hessian(y, np.ones(len(clearance)), clearance)
+
+
+def test_exact_hessian_includes_the_drives_friction():
+    """On an IMPROV assembly (armature, viscous and smoothed Coulomb friction in the motor torque)
+    the exact Hessian still equals differences of the exact Jacobian, and the friction's
+    curvature matters: without it the velocity block would differ."""
+    scenario = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
+    composition = Composition.from_name("base-PB21-L2-PB21-L4-L3", scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    assert verdict.passed, verdict.message
+    settings = OptimizerSettings(nodes=4, substeps=2)
+    problem = composition_problem(
+        composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, settings
+    )
+    assert problem.robot.has_friction
+    y = perturbed_guess(problem, seed=9)
+    rows = problem.rows_of("continuity", "path", "midpoint", "torque")
+    multipliers = np.random.default_rng(6).standard_normal(len(rows))
+    hessian = problem.exact_hessian(y, multipliers, rows).toarray()
+    fd = central_difference(lambda z: problem.evaluate(z).jacobian[rows].T @ multipliers, y, eps=1e-7)
+    scale = np.abs(fd).max()
+    assert np.abs(hessian - fd).max() < 1e-5 * scale, np.abs(hessian - fd).max() / scale
+    v = problem.unpack(y)[1][1:-1, problem.nv :]
+    assert np.abs(problem.robot.friction_second_derivative(v)).max() > 1.0  # within the tanh's bend
 
 
 @pytest.mark.parametrize("transcription", TRANSCRIPTIONS)

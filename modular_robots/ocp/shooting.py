@@ -404,7 +404,12 @@ class ShootingProblem:
         fractions = np.arange(S + 1) / (N * S)
         torque_rows = np.any(tau != 0.0)
         if torque_rows:
-            curvature = rnea_curvature(self.robot, q, v, np.repeat(controls, S + 1, axis=0), tau.reshape(-1, nv))
+            weight = tau.reshape(-1, nv)
+            curvature = rnea_curvature(self.robot, q, v, np.repeat(controls, S + 1, axis=0), weight)
+            if self.robot.has_friction:  # the motor torque adds friction(v), diagonal in v
+                curvature[5][:] += weight * self.robot.friction_derivative(v)
+                diagonal = np.arange(nv)
+                curvature[1][:, diagonal, diagonal] += weight * self.robot.friction_second_derivative(v)
             weight_q += curvature[4].reshape(N, S + 1, nv)
             weight_v += curvature[5].reshape(N, S + 1, nv)
         local = kinematic_hessians(fractions, tf, controls, weight_q, weight_v)
