@@ -113,7 +113,9 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: dict) -> dict:
 def _shapes(link) -> list[dict]:
     out = []
     for collision in link.collisions:
-        geometry, origin = collision.geometry, _columns(collision.origin)
+        # yourdfpy leaves the origin None when the URDF gives none (the identity)
+        geometry = collision.geometry
+        origin = _columns(np.eye(4) if collision.origin is None else collision.origin)
         if geometry.cylinder is not None:
             out.append(
                 {
@@ -217,7 +219,7 @@ def _asset(name: str) -> str:
 
 def page(scene: dict, panel_html: str, title: str) -> str:
     """The whole page: styles, the panel, the player, three.js and the scene, inlined."""
-    data = json.dumps(scene, separators=(",", ":")).replace("</", "<\\/")
+    data = json.dumps(scene, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
     return (
         "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
         f"<title>{html.escape(title)}</title><style>{_asset('viewer.css')}</style></head><body>"

@@ -62,6 +62,25 @@ def test_view_open_without_a_browser_says_so_and_fails(folder, tmp_path, monkeyp
     assert (copy / VIEWER).is_file()
 
 
+def test_the_scene_of_an_improv_assembly_places_every_shape(tmp_path):
+    """A general-catalogue URDF (IMPROV, collision shapes without an ``<origin>``): every shape
+    of the scene has a finite pose (the identity where the URDF gives none) and the page's data
+    is strict JSON (a NaN once made the browser reject the whole scene)."""
+    urdf = tmp_path / "improv.urdf"
+    scenario = ROOT / "scenarios" / "improv-pick.yaml"
+    name = "base-PB21-L2-PB21-L4-L3"
+    result = CliRunner().invoke(main, ["urdf", name, "--scenario", str(scenario), "-o", str(urdf)])
+    assert result.exit_code == 0, result.output
+    assert "<collision>\n      <geometry>" in urdf.read_text()  # a shape without an origin
+    t = np.array([0.0, 1.0])
+    q = np.zeros((2, 4))
+    trajectory = Trajectory(t, q, q, q, q, np.zeros((2, 3)))
+    scene = scene_data(urdf, trajectory, {"task": {"start": [0, 0, 0], "goal": [0, 0, 0], "obstacles": []}})
+    shapes = [shape for link in scene["links"] for shape in link["shapes"]]
+    assert shapes and all(len(shape["origin"]) == 16 and np.all(np.isfinite(shape["origin"])) for shape in shapes)
+    json.dumps(scene, allow_nan=False)
+
+
 def test_the_scene_carries_the_payload_from_start_to_goal(folder):
     """yourdfpy's forward kinematics of the URDF along the plan put the payload link on the task's
     start at t = 0 and on its goal at tf (Pinocchio planned it: two libraries agree)."""
