@@ -18,7 +18,7 @@ import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InfeasibleError, InputError, ModularRobotsError, Terminated, shorten
-from .execution import JOBS_PER_CORE, available_cores, make_engine, max_jobs, terminations_raise
+from .execution import ENGINES, JOBS_PER_CORE, available_cores, make_engine, max_jobs, terminations_raise
 from .feasibility import (
     MAX_COMPOSITIONS,
     TEST_NAMES,
@@ -30,7 +30,7 @@ from .feasibility import (
 )
 from .folder import atomic_write, check_writable
 from .ocp.candidate import BoundaryPair
-from .pipeline import optimize_composition, run_scenario, with_pruning
+from .pipeline import optimize_composition, run_scenario, with_execution, with_pruning
 from .report import RESULT, export_controller_rate
 from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
@@ -254,6 +254,44 @@ def _space(scenario, jobs: int, max_compositions: int) -> int:
     return total
 
 
+_engine = click.option(
+    "--engine",
+    type=click.Choice(ENGINES),
+    default=None,
+    show_default="the scenario's execution.engine, else process",
+    help="Where steps B-D run: worker processes on this machine, or a Ray cluster.",
+)
+
+
+def _ray_address(ctx, param, text: str | None) -> str | None:
+    if text is not None and (not text.strip() or text != text.strip() or len(text) > 300):
+        raise click.BadParameter(f"expected a Ray address (auto, host:port or ray://host:port), got {shorten(text)}")
+    return text
+
+
+_address = click.option(
+    "--address",
+    type=str,
+    default=None,
+    callback=_ray_address,
+    help="The Ray cluster to run on (auto: the one `ray start --head` started on this machine; host:port); "
+    "implies --engine ray. Without it, --engine ray starts a Ray instance of this run's own with --jobs CPUs.",
+)
+
+
+def _execution(scenario, engine: str | None, address: str | None):
+    """``scenario`` with the command line's engine and address (:func:`with_execution`)."""
+    if engine == "process" and address is not None:
+        raise click.BadParameter(
+            "--address is a Ray cluster's; use --engine ray, or leave --address out", param_hint="--address"
+        )
+    return with_execution(scenario, engine, address)
+
+
+def _on_ray(scenario) -> bool:
+    return scenario.execution.engine == "ray"
+
+
 _max_compositions = click.option(
     "--max-compositions",
     type=click.IntRange(min=1),
@@ -468,17 +506,26 @@ def optimize_command(
     help="Override the ratio rule's threshold.",
 )
 @_jobs
+@_engine
+@_address
 @_max_compositions
 @_user_errors
 def run_command(
-    scenario_path: Path, out: Path | None, rule: str | None, threshold: float | None, jobs: int, max_compositions: int
+    scenario_path: Path,
+    out: Path | None,
+    rule: str | None,
+    threshold: float | None,
+    jobs: int,
+    engine: str | None,
+    address: str | None,
+    max_compositions: int,
 ) -> None:
     """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
-    scenario = with_pruning(load_scenario(scenario_path), rule, threshold)
+    scenario = _execution(with_pruning(load_scenario(scenario_path), rule, threshold), engine, address)
     if threshold is not None and scenario.pruning.rule == "none":
         click.echo(f"warning: --threshold {threshold:g} has no effect: the rule none never prunes", err=True)
     out = out or Path("results") / scenario.name
-    _space(scenario, make_engine(jobs).jobs, max_compositions)
+    _space(scenario, make_engine(jobs, scenario.execution).jobs, max_compositions)
     click.echo(
         f"{scenario.name}: rule {scenario.pruning.rule}"
         + (
@@ -486,6 +533,7 @@ def run_command(
             if scenario.pruning.rule == "ratio"
             else ""
         )
+        + (f"; on Ray at {scenario.execution.address or 'an instance of its own'}" if _on_ray(scenario) else "")
         + f"; results in {out}",
         err=True,
     )
