@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import functools
+import itertools
 import json
 import math
 import os
@@ -34,6 +35,7 @@ from .pipeline import optimize_composition, run_scenario, with_execution, with_p
 from .report import RESULT, export_controller_rate
 from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .urdf import write_urdf
+from .verdicts import VerdictFile
 from .viewer import write_viewer
 
 __all__ = ["main"]
@@ -244,9 +246,9 @@ _jobs = click.option(
 )
 
 
-def _space(scenario, jobs: int, max_compositions: int) -> int:
+def _space(scenario, jobs: int, max_compositions: int, limit: int | None = None) -> int:
     """Say how many compositions step B will check and about how long it takes (or refuse)."""
-    total = composition_space(scenario.catalog, max_compositions, jobs)
+    total = composition_space(scenario.catalog, max_compositions, jobs, limit)
     click.echo(
         f"step A: {total:,} compositions; step B takes about {estimate_seconds(total, jobs):.0f} s on {jobs} core(s)",
         err=True,
@@ -373,6 +375,8 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 @main.command("filter")
 @click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
 @_jobs
+@_engine
+@_address
 @click.option(
     "--seeds",
     type=click.IntRange(min=1, max=1000),
@@ -388,38 +392,75 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
     default=None,
     help="Write the verdict summary and the survivors with their boundary configurations as JSON.",
 )
+@click.option(
+    "--verdicts",
+    type=str,
+    callback=_file_name("JSON Lines"),
+    default=None,
+    help="Write every verdict to this file as it comes (one JSON line per composition, flushed); if the "
+    "file holds verdicts already (an interrupted filter), resume after them.",
+)
+@click.option(
+    "--limit",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Check only the first LIMIT compositions of the space (a streamed prefix).",
+)
 @_max_compositions
 @_user_errors
-def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None, max_compositions: int) -> None:
+def filter_command(
+    scenario_path: Path,
+    jobs: int,
+    engine: str | None,
+    address: str | None,
+    seeds: int,
+    out: Path | None,
+    verdicts: Path | None,
+    limit: int | None,
+    max_compositions: int,
+) -> None:
     """Step B: which compositions can hold the start and the goal (reach, IK, torque, collision)."""
-    scenario = load_scenario(scenario_path)
+    scenario = _execution(load_scenario(scenario_path), engine, address)
     settings = FeasibilitySettings(seeds=seeds)
-    engine = make_engine(jobs)
-    if out is not None:
-        check_writable(out.parent)
-    total = _space(scenario, engine.jobs, max_compositions)
-    summary = FeasibilitySummary()
-    start = time.perf_counter()
-    with click.progressbar(
-        length=total, label=f"step B on {total} compositions", file=sys.stderr, show_pos=True
-    ) as bar:
-        for verdict in filter_compositions(
-            scenario, engine=engine, settings=settings, max_compositions=max_compositions
+    for path in (out, verdicts):
+        if path is not None:
+            check_writable(path.parent)
+    runner = make_engine(jobs, scenario.execution)
+    try:
+        total = _space(scenario, runner.jobs, max_compositions, limit)
+        summary = FeasibilitySummary()
+        start = time.perf_counter()
+        compositions = itertools.islice(enumerate_compositions(scenario.catalog), total)
+        with (
+            VerdictFile(verdicts, scenario, settings) if verdicts else contextlib.nullcontext() as file,
+            click.progressbar(
+                length=total, label=f"step B on {total} compositions", file=sys.stderr, show_pos=True
+            ) as bar,
         ):
-            summary.add(verdict)
-            bar.update(1)
+            for verdict in file.recorded(compositions) if file else ():
+                summary.add(verdict)
+                bar.update(1)
+            resumed = summary.checked
+            for verdict in filter_compositions(scenario, compositions, engine=runner, settings=settings):
+                if file:
+                    file.write(verdict)
+                summary.add(verdict)
+                bar.update(1)
+        jobs = runner.jobs
+    finally:
+        runner.close()
     wall = time.perf_counter() - start
     click.echo(_feasibility_table(summary))
     click.echo(
         f"{len(summary.survivors)} of {summary.checked} compositions are feasible "
-        f"({wall:.1f} s wall, {engine.jobs} worker(s))"
+        f"({wall:.1f} s wall, {jobs} worker(s)"
+        + (f"; {resumed} verdict(s) read back from {verdicts}" if resumed else "")
+        + ")"
     )
     if summary.survivors:
         click.echo(_survivor_table(summary))
     if out is not None:
-        atomic_write(
-            out, json.dumps(_feasibility_json(scenario, settings, summary, wall, engine.jobs), indent=1) + "\n"
-        )
+        atomic_write(out, json.dumps(_feasibility_json(scenario, settings, summary, wall, jobs), indent=1) + "\n")
         click.echo(f"wrote {out}")
     if not summary.survivors:
         raise InfeasibleError(summary.diagnosis())
