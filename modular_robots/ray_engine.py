@@ -298,13 +298,17 @@ class RayExecutor:
 
     def advance(self, names):
         calls = {name: self._actor(name).advance.remote() for name in names}  # all at once: one round
-        out = {}
-        for name, call in calls.items():
-            try:
-                out[name] = ray.get(call)
-            except ray.exceptions.RayActorError as exc:
-                out[name] = (True, Lost(f"its Ray actor died: {_death(exc)}"))
-            if out[name][0]:
+        try:
+            out = dict(zip(calls, ray.get(list(calls.values()))))  # one wait for the whole round
+        except ray.exceptions.RayActorError:
+            out = {}
+            for name, call in calls.items():  # which actor died, and the others' steps
+                try:
+                    out[name] = ray.get(call)
+                except ray.exceptions.RayActorError as exc:
+                    out[name] = (True, Lost(f"its Ray actor died: {_death(exc)}"))
+        for name, (ended, _) in out.items():
+            if ended:
                 self._release(name)
         return out
 
