@@ -1,5 +1,5 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
-runs only those (models, feasibility, ocp, ipopt, pruning, margins, suite). RESULTS.md is rewritten at the end.
+runs only those (models, feasibility, ocp, ipopt, pruning, margins, suite, engines). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -9,6 +9,7 @@ import sys
 from modular_robots.execution import single_threaded_blas
 
 from . import (
+    bench_engines,
     bench_feasibility,
     bench_ipopt,
     bench_margins,
@@ -27,6 +28,7 @@ BENCHES = {
     "pruning": bench_pruning,
     "margins": bench_margins,
     "suite": bench_suite,
+    "engines": bench_engines,
 }
 
 with single_threaded_blas():
