@@ -10,7 +10,9 @@ A local Ray cluster (a head node on the loopback address, 2 CPUs, no dashboard) 
 from __future__ import annotations
 
 import json
+import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -85,6 +87,47 @@ def test_a_signal_to_a_ray_run_is_recorded_as_an_interruption(tmp_path, signum):
     document = json.loads((out / "result.json").read_text())
     assert document["status"] == "interrupted" and document["partial"] is True
     assert len(document["candidates"]) == 6
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_run_on_a_cluster_started_separately_with_ray_start(tmp_path):
+    """``ray start --head`` (loopback only, 2 CPUs), then ``run --address``: the run uses that
+    cluster and leaves it running. (``--block`` keeps the head in one process, stopped below by
+    its id; ``ray stop`` would stop every Ray cluster on the machine.)"""
+    port = _free_port()
+    env = dict(os.environ, RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0")  # a head on 127.0.0.1, not the network
+    head = subprocess.Popen(
+        [str(Path(sys.executable).parent / "ray"), "start", "--head", "--block", "--port", str(port)]
+        + ["--num-cpus", "2", "--include-dashboard=false", "--disable-usage-stats"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        out = tmp_path / "out"
+        run = subprocess.run(
+            [*CLI, "run", str(SMALL), "--address", f"127.0.0.1:{port}", "--out", str(out)],
+            env=dict(env, RAY_AUTH_MODE="token"),  # ray start made the token a driver must show
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert run.returncode == 0, run.stderr[-2000:]
+        document = json.loads((out / "result.json").read_text())
+        assert document["settings"]["engine"] == "ray"
+        assert document["winner"]["composition"] == "B-J1-L1-J1-L1-J1-L1-E2"
+        assert [c["status"] for c in document["candidates"]] == ["optimal"] * 6
+        assert head.poll() is None  # the cluster outlives the run
+    finally:
+        head.send_signal(signal.SIGTERM)
+        head.wait(timeout=60)
 
 
 # -- on a local cluster ----------------------------------------------------------------------------
