@@ -222,6 +222,73 @@ def _profile_lines() -> list[str]:
     return lines + [""]
 
 
+def _engines_lines() -> list[str]:
+    """The engines side by side (``bench_engines.py``)."""
+    doc = _load("engines")
+    if not doc:
+        return []
+    lines = [
+        "## Engines: worker processes and Ray",
+        "",
+        _measured(doc),
+        f"Step B on `{doc['scenario']}`"
+        + (f" (first {doc['limit']:,} compositions)" if doc.get("limit") else "")
+        + ", same CPUs, same verdicts. Ray on an instance of its own (loopback only), its workers started "
+        "by a first short stream (cold start below):",
+        "",
+        "| engine | CPUs | assemblies | wall s | assemblies per s | vs process |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in doc["rows"]:
+        lines.append(
+            f"| {r['engine']} | {r['cpus']} | {r['assemblies']} | {_fmt(r['wall_s'])} | {r['per_s']:.0f} | "
+            f"{_fmt(r.get('vs_process', 1.0))} |"
+        )
+    ray_row = doc["rows"][-1]
+    rounds, run = doc["lockstep"], doc["small_run"]
+    lines += [
+        "",
+        f"Ray instance start {_fmt(ray_row['instance_start_s'])} s; first stream (workers starting) "
+        f"{_fmt(ray_row['cold_first_stream_s'])} s.",
+        "",
+        "Steps C+D, Ray's overhead per lockstep round:",
+        "",
+        "| measure | process | ray | overhead per round |",
+        "|---|---|---|---|",
+        f"| empty round, {rounds['candidates']} idle candidates, {rounds['rounds']} rounds | "
+        f"{_fmt(rounds['process_round_ms'])} ms | {_fmt(rounds['ray_round_ms'])} ms | "
+        f"{_fmt(rounds['ray_overhead_per_round_ms'])} ms |",
+        f"| `run` small ({run['candidates']} candidates, {run['rounds']} rounds, {run['iterations']} iterations), "
+        f"steps C+D | {_fmt(run['process_steps_cd_s'])} s | {_fmt(run['ray_steps_cd_s'])} s | "
+        f"{_fmt(run['ray_overhead_per_round_ms'])} ms |",
+        f"| the same, rounds 2 on (the first starts every actor's process: "
+        f"{_fmt(run['ray_first_round_extra_s'])} s more on Ray) | | | "
+        f"{_fmt(run['ray_overhead_per_later_round_ms'])} ms |",
+        "",
+        "Estimated wall time on N machines of 2 cores, from the measured costs (step B: the Ray run's CPU "
+        "seconds per assembly over every core; steps C+D: the small run's lockstep, ceil(alive / cores) "
+        f"iterations of {_fmt(run['seconds_per_iteration'])} s per round plus Ray's empty round; it stops "
+        "falling once every live candidate has a core: a round waits for its slowest candidate). The IMPROV "
+        "columns use the paper catalogue's cost per assembly until they are measured on IMPROV:",
+        "",
+    ]
+    keys = list(doc["estimate"][0])
+    lines += ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    for r in doc["estimate"]:
+        lines.append("| " + " | ".join(_fmt(r[k]) for k in keys) + " |")
+    lines += [
+        "",
+        "Peak resident memory (largest process) as the streamed space grows (paper catalogue widened to 8 DOF):",
+        "",
+        "| command | assemblies | peak RSS MB | wall s |",
+        "|---|---|---|---|",
+    ]
+    for r in doc["memory"]:
+        lines.append(f"| {r['command']} | {r['assemblies']:,} | {r['peak_rss_mb']:.0f} | {_fmt(r['wall_s'])} |")
+    lines += ["", f"Pending: {doc['pending']}.", ""]
+    return lines
+
+
 def build() -> str:
     feasibility, ocp, pruning = _load("feasibility"), _load("ocp"), _load("pruning")
     lines = [
@@ -368,6 +435,7 @@ def build() -> str:
                 )
         lines.append("")
     lines += _suite_lines()
+    lines += _engines_lines()
     margins = _load("margins")
     if margins:
         lines += [

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import functools
+import itertools
 import json
 import math
 import os
@@ -18,7 +19,7 @@ import click
 
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InfeasibleError, InputError, ModularRobotsError, Terminated, shorten
-from .execution import JOBS_PER_CORE, available_cores, make_engine, max_jobs, terminations_raise
+from .execution import ENGINES, JOBS_PER_CORE, available_cores, make_engine, max_jobs, terminations_raise
 from .feasibility import (
     MAX_COMPOSITIONS,
     TEST_NAMES,
@@ -30,11 +31,12 @@ from .feasibility import (
 )
 from .folder import atomic_write, check_writable
 from .ocp.candidate import BoundaryPair
-from .pipeline import optimize_composition, run_scenario, with_pruning
+from .pipeline import optimize_composition, run_scenario, with_execution, with_pruning
 from .report import RESULT, export_controller_rate
 from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .timor import import_timor
 from .urdf import write_urdf
+from .verdicts import VerdictFile
 from .viewer import write_viewer
 
 __all__ = ["main"]
@@ -245,14 +247,52 @@ _jobs = click.option(
 )
 
 
-def _space(scenario, jobs: int, max_compositions: int) -> int:
+def _space(scenario, jobs: int, max_compositions: int, limit: int | None = None) -> int:
     """Say how many compositions step B will check and about how long it takes (or refuse)."""
-    total = composition_space(scenario.catalog, max_compositions, jobs)
+    total = composition_space(scenario.catalog, max_compositions, jobs, limit)
     click.echo(
         f"step A: {total:,} compositions; step B takes about {estimate_seconds(total, jobs):.0f} s on {jobs} core(s)",
         err=True,
     )
     return total
+
+
+_engine = click.option(
+    "--engine",
+    type=click.Choice(ENGINES),
+    default=None,
+    show_default="the scenario's execution.engine, else process",
+    help="Where steps B-D run: worker processes on this machine, or a Ray cluster.",
+)
+
+
+def _ray_address(ctx, param, text: str | None) -> str | None:
+    if text is not None and (not text.strip() or text != text.strip() or len(text) > 300):
+        raise click.BadParameter(f"expected a Ray address (auto, host:port or ray://host:port), got {shorten(text)}")
+    return text
+
+
+_address = click.option(
+    "--address",
+    type=str,
+    default=None,
+    callback=_ray_address,
+    help="The Ray cluster to run on (auto: the one `ray start --head` started on this machine; host:port); "
+    "implies --engine ray. Without it, --engine ray starts a Ray instance of this run's own with --jobs CPUs.",
+)
+
+
+def _execution(scenario, engine: str | None, address: str | None):
+    """``scenario`` with the command line's engine and address (:func:`with_execution`)."""
+    if engine == "process" and address is not None:
+        raise click.BadParameter(
+            "--address is a Ray cluster's; use --engine ray, or leave --address out", param_hint="--address"
+        )
+    return with_execution(scenario, engine, address)
+
+
+def _on_ray(scenario) -> bool:
+    return scenario.execution.engine == "ray"
 
 
 _max_compositions = click.option(
@@ -357,6 +397,8 @@ def import_timor_command(modules_json: Path, overrides: Path | None, output: Pat
 @main.command("filter")
 @click.argument("scenario_path", type=_existing_file, metavar="SCENARIO")
 @_jobs
+@_engine
+@_address
 @click.option(
     "--seeds",
     type=click.IntRange(min=1, max=1000),
@@ -372,38 +414,75 @@ def import_timor_command(modules_json: Path, overrides: Path | None, output: Pat
     default=None,
     help="Write the verdict summary and the survivors with their boundary configurations as JSON.",
 )
+@click.option(
+    "--verdicts",
+    type=str,
+    callback=_file_name("JSON Lines"),
+    default=None,
+    help="Write every verdict to this file as it comes (one JSON line per composition, flushed); if the "
+    "file holds verdicts already (an interrupted filter), resume after them.",
+)
+@click.option(
+    "--limit",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Check only the first LIMIT compositions of the space (a streamed prefix).",
+)
 @_max_compositions
 @_user_errors
-def filter_command(scenario_path: Path, jobs: int, seeds: int, out: Path | None, max_compositions: int) -> None:
+def filter_command(
+    scenario_path: Path,
+    jobs: int,
+    engine: str | None,
+    address: str | None,
+    seeds: int,
+    out: Path | None,
+    verdicts: Path | None,
+    limit: int | None,
+    max_compositions: int,
+) -> None:
     """Step B: which compositions can hold the start and the goal (reach, IK, torque, collision)."""
-    scenario = load_scenario(scenario_path)
+    scenario = _execution(load_scenario(scenario_path), engine, address)
     settings = FeasibilitySettings(seeds=seeds)
-    engine = make_engine(jobs)
-    if out is not None:
-        check_writable(out.parent)
-    total = _space(scenario, engine.jobs, max_compositions)
-    summary = FeasibilitySummary()
-    start = time.perf_counter()
-    with click.progressbar(
-        length=total, label=f"step B on {total} compositions", file=sys.stderr, show_pos=True
-    ) as bar:
-        for verdict in filter_compositions(
-            scenario, engine=engine, settings=settings, max_compositions=max_compositions
+    for path in (out, verdicts):
+        if path is not None:
+            check_writable(path.parent)
+    runner = make_engine(jobs, scenario.execution)
+    try:
+        total = _space(scenario, runner.jobs, max_compositions, limit)
+        summary = FeasibilitySummary()
+        start = time.perf_counter()
+        compositions = itertools.islice(enumerate_compositions(scenario.catalog), total)
+        with (
+            VerdictFile(verdicts, scenario, settings) if verdicts else contextlib.nullcontext() as file,
+            click.progressbar(
+                length=total, label=f"step B on {total} compositions", file=sys.stderr, show_pos=True
+            ) as bar,
         ):
-            summary.add(verdict)
-            bar.update(1)
+            for verdict in file.recorded(compositions) if file else ():
+                summary.add(verdict)
+                bar.update(1)
+            resumed = summary.checked
+            for verdict in filter_compositions(scenario, compositions, engine=runner, settings=settings):
+                if file:
+                    file.write(verdict)
+                summary.add(verdict)
+                bar.update(1)
+        jobs = runner.jobs
+    finally:
+        runner.close()
     wall = time.perf_counter() - start
     click.echo(_feasibility_table(summary))
     click.echo(
         f"{len(summary.survivors)} of {summary.checked} compositions are feasible "
-        f"({wall:.1f} s wall, {engine.jobs} worker(s))"
+        f"({wall:.1f} s wall, {jobs} worker(s)"
+        + (f"; {resumed} verdict(s) read back from {verdicts}" if resumed else "")
+        + ")"
     )
     if summary.survivors:
         click.echo(_survivor_table(summary))
     if out is not None:
-        atomic_write(
-            out, json.dumps(_feasibility_json(scenario, settings, summary, wall, engine.jobs), indent=1) + "\n"
-        )
+        atomic_write(out, json.dumps(_feasibility_json(scenario, settings, summary, wall, jobs), indent=1) + "\n")
         click.echo(f"wrote {out}")
     if not summary.survivors:
         raise InfeasibleError(summary.diagnosis())
@@ -490,17 +569,26 @@ def optimize_command(
     help="Override the ratio rule's threshold.",
 )
 @_jobs
+@_engine
+@_address
 @_max_compositions
 @_user_errors
 def run_command(
-    scenario_path: Path, out: Path | None, rule: str | None, threshold: float | None, jobs: int, max_compositions: int
+    scenario_path: Path,
+    out: Path | None,
+    rule: str | None,
+    threshold: float | None,
+    jobs: int,
+    engine: str | None,
+    address: str | None,
+    max_compositions: int,
 ) -> None:
     """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
-    scenario = with_pruning(load_scenario(scenario_path), rule, threshold)
+    scenario = _execution(with_pruning(load_scenario(scenario_path), rule, threshold), engine, address)
     if threshold is not None and scenario.pruning.rule == "none":
         click.echo(f"warning: --threshold {threshold:g} has no effect: the rule none never prunes", err=True)
     out = out or Path("results") / scenario.name
-    _space(scenario, make_engine(jobs).jobs, max_compositions)
+    _space(scenario, make_engine(jobs, scenario.execution).jobs, max_compositions)
     click.echo(
         f"{scenario.name}: rule {scenario.pruning.rule}"
         + (
@@ -508,6 +596,7 @@ def run_command(
             if scenario.pruning.rule == "ratio"
             else ""
         )
+        + (f"; on Ray at {scenario.execution.address or 'an instance of its own'}" if _on_ray(scenario) else "")
         + f"; results in {out}",
         err=True,
     )

@@ -13,6 +13,7 @@ __all__ = [
     "InfeasibleError",
     "ResultsFolderError",
     "FolderBusyError",
+    "EngineError",
     "Terminated",
     "shorten",
 ]
@@ -54,6 +55,11 @@ class ResultsFolderError(ModularRobotsError):
 
 class FolderBusyError(ResultsFolderError):
     """Another process of this package holds the results folder's lock."""
+
+
+class EngineError(ModularRobotsError):
+    """An execution engine cannot be used: Ray is not installed, or its cluster cannot be
+    reached."""
 
 
 class Terminated(KeyboardInterrupt):

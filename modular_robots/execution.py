@@ -9,8 +9,10 @@ Two kinds of work, each with a serial and a process implementation:
   ``close()`` and ``result``) and advance each by one step on command, so the pruning manager can
   run them in lockstep wherever they live.
 
-A distributed engine (e.g. Ray) plugs in here: an :class:`Engine` only has to provide
-:meth:`Engine.map_chunks` and an :class:`Executor` its four methods.
+A distributed engine plugs in here: an :class:`Engine` only has to provide
+:meth:`Engine.map_chunks` and :meth:`Engine.close`, and an :class:`Executor` its four methods.
+:class:`ExecutionSettings` chooses one: ``process`` (this module) or ``ray``
+(:mod:`~modular_robots.ray_engine`, imported only when chosen, so Ray stays optional).
 
 Our matrices are small (tens to hundreds of unknowns) and every core already runs a worker, so
 multithreaded BLAS only adds synchronisation (one profiled solve on 2 busy cores: 19.9 s with
@@ -33,6 +35,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 from threadpoolctl import ThreadpoolController, threadpool_limits
@@ -40,6 +43,9 @@ from threadpoolctl import ThreadpoolController, threadpool_limits
 from .exceptions import InputError, ModularRobotsError, Terminated, shorten
 
 __all__ = [
+    "ENGINES",
+    "ExecutionSettings",
+    "Lost",
     "Engine",
     "SerialEngine",
     "ProcessEngine",
@@ -57,6 +63,27 @@ __all__ = [
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+#: Where steps B-D run: worker processes on this machine, or a Ray cluster.
+ENGINES = ("process", "ray")
+
+
+@dataclass(frozen=True)
+class ExecutionSettings:
+    """The engine that runs steps B-D (one of :data:`ENGINES`) and, for ``ray``, the ``address``
+    of a running cluster (``auto``: the one started on this machine with ``ray start --head``;
+    ``host:port``; None: a Ray instance of this process's own, with ``jobs`` CPUs)."""
+
+    engine: str = "process"
+    address: str | None = None
+
+
+@dataclass(frozen=True)
+class Lost:
+    """What an executor returns as the end of a job whose worker died under it (killed, out of
+    memory, its machine gone): the run goes on without it, and says why."""
+
+    reason: str
 
 
 def single_threaded_blas() -> contextlib.AbstractContextManager:
@@ -239,6 +266,10 @@ class Engine(Protocol):
         self, work: Callable[[Any, list[T]], list[R]], context: Any, items: Iterable[T], chunksize: int = 16
     ) -> Iterator[R]: ...
 
+    def close(self) -> None:
+        """Release what the engine holds beyond a stream (a cluster connection it opened)."""
+        ...
+
 
 def _chunks(items: Iterable[T], size: int) -> Iterator[list[T]]:
     iterator = iter(items)
@@ -262,6 +293,9 @@ class SerialEngine:
             with blas.limit(limits=1):
                 results = work(context, chunk)
             yield from results
+
+    def close(self) -> None:
+        pass
 
 
 _CONTEXT: Any = None
@@ -340,11 +374,20 @@ class ProcessEngine:
                 for future in pending:
                     future.cancel()
 
+    def close(self) -> None:
+        pass
 
-def make_engine(jobs: int | None = None) -> Engine:
+
+def make_engine(jobs: int | None = None, execution: ExecutionSettings | None = None) -> Engine:
     """``jobs`` = 1: :class:`SerialEngine`; ``None`` or 0: every available core
-    (:func:`resolve_jobs`)."""
+    (:func:`resolve_jobs`). With ``execution.engine`` = ``ray``, a
+    :class:`~modular_robots.ray_engine.RayEngine` (``jobs``: the CPUs of a Ray instance of this
+    process's own; a cluster at ``execution.address`` has its own)."""
     jobs = resolve_jobs(jobs)
+    if execution is not None and execution.engine == "ray":
+        from .ray_engine import RayEngine
+
+        return RayEngine(execution.address, jobs)
     return SerialEngine() if jobs == 1 else ProcessEngine(jobs)
 
 
@@ -359,9 +402,12 @@ class Executor(Protocol):
     def names(self) -> list[str]: ...
 
     def advance(self, names: Sequence[str]) -> dict[str, tuple[bool, Any]]:
-        """One step of each named job: ``(False, step)``, or ``(True, result)`` if it ended.
+        """One step of each named job: ``(False, step)``, or ``(True, result)`` if it ended;
+        ``(True, Lost(reason))`` if its worker died and the executor hosts each job on a worker
+        of its own.
 
-        Raises :class:`~modular_robots.exceptions.ModularRobotsError` if a worker died."""
+        Raises :class:`~modular_robots.exceptions.ModularRobotsError` if a worker hosting
+        several jobs died."""
         ...
 
     def stop(self, names: Sequence[str]) -> dict[str, Any]:
@@ -517,9 +563,16 @@ def make_executor(
     specs: Sequence[Any],
     names: Sequence[str],
     jobs: int | None = None,
+    execution: ExecutionSettings | None = None,
 ) -> Executor:
     """``jobs`` = 1: :class:`InProcessExecutor`; ``None`` or 0: a worker process per core
-    (:func:`resolve_jobs`)."""
+    (:func:`resolve_jobs`). With ``execution.engine`` = ``ray``, a
+    :class:`~modular_robots.ray_engine.RayExecutor`: a Ray actor per job (``jobs``: the CPUs of
+    a Ray instance of this process's own, if it is not connected yet)."""
+    if execution is not None and execution.engine == "ray":
+        from .ray_engine import RayExecutor
+
+        return RayExecutor(factory, context, specs, names, execution.address, jobs or available_cores())
     jobs = resolve_jobs(jobs)
     if jobs == 1:
         return InProcessExecutor(factory, context, specs, names)

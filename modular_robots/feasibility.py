@@ -460,8 +460,11 @@ SECONDS_PER_COMPOSITION = 2.5e-3
 MAX_COMPOSITIONS = 1_000_000
 
 
-def composition_space(catalog: Catalog, max_compositions: int = MAX_COMPOSITIONS, jobs: int = 1) -> int:
-    """The number of compositions of step A, counted without listing them.
+def composition_space(
+    catalog: Catalog, max_compositions: int = MAX_COMPOSITIONS, jobs: int = 1, limit: int | None = None
+) -> int:
+    """The number of compositions of step A, counted without listing them (only the first
+    ``limit`` if given: a streamed prefix of the space).
 
     Raises
     ------
@@ -470,6 +473,8 @@ def composition_space(catalog: Catalog, max_compositions: int = MAX_COMPOSITIONS
         wall time on ``jobs`` cores, before any work starts.
     """
     total = sum(count_compositions(catalog).values())
+    if limit is not None:
+        total = min(total, limit)
     if total == 0:
         low, high = catalog.grammar.dof
         raise InputError(
@@ -479,7 +484,8 @@ def composition_space(catalog: Catalog, max_compositions: int = MAX_COMPOSITIONS
     if total > max_compositions:
         low, high = catalog.grammar.dof
         raise InputError(
-            f"the catalogue {shorten(catalog.name)} allows {total:,} compositions ({low} to {high} DOF); step B would "
+            f"the catalogue {shorten(catalog.name)} allows {total:,} compositions ({low} to {high} DOF)"
+            f"{' in the prefix asked for' if limit is not None else ''}; step B would "
             f"take about {_duration(estimate_seconds(total, jobs))} on {jobs} core(s). Narrow its "
             f"grammar (grammar.dof) or raise the limit of {max_compositions:,} (--max-compositions)"
         )

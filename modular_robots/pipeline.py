@@ -21,7 +21,7 @@ import numpy as np
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
 from .exceptions import CompositionError, InfeasibleError, Terminated, shorten
-from .execution import make_engine, make_executor, single_threaded_blas
+from .execution import ExecutionSettings, make_engine, make_executor, single_threaded_blas
 from .feasibility import (
     MAX_COMPOSITIONS,
     FeasibilitySettings,
@@ -47,6 +47,7 @@ __all__ = [
     "run_scenario",
     "track_winner",
     "winner_approach",
+    "with_execution",
     "with_pruning",
 ]
 
@@ -119,7 +120,9 @@ def run_scenario(
     out
         Results folder (SPEC §7), written as results arrive; None writes nothing.
     jobs
-        Worker processes (None or 0: every core; 1: this process only).
+        Worker processes (None or 0: every core; 1: this process only); with the ``ray`` engine
+        (``scenario.execution``), the CPUs of a Ray instance of the run's own (a cluster at an
+        address has its own).
     on_progress
         Called with ``(stage, figures)`` during the run (``feasibility`` / ``optimization``).
     max_compositions
@@ -135,11 +138,18 @@ def run_scenario(
         then says why.
     """
     notify = on_progress or (lambda stage, figures: None)
-    engine = make_engine(jobs)
+    engine = make_engine(jobs, scenario.execution)
+    try:
+        return _run(scenario, out, engine, feasibility, notify, max_compositions)
+    finally:
+        engine.close()
+
+
+def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunResult:
     composition_space(scenario.catalog, max_compositions, engine.jobs)
     summary = FeasibilitySummary()
     start = time.perf_counter()
-    with RunRecorder(out, scenario, jobs=engine.jobs) as recorder:
+    with RunRecorder(out, scenario, jobs=engine.jobs, engine=scenario.execution.engine) as recorder:
         stream = filter_compositions(scenario, engine=engine, settings=feasibility, max_compositions=max_compositions)
         for verdict in stream:
             summary.add(verdict)
@@ -171,7 +181,9 @@ def run_scenario(
             )
             return results
 
-        executor = make_executor(make_candidate, scenario, specs, [s.name for s in specs], engine.jobs)
+        executor = make_executor(
+            make_candidate, scenario, specs, [s.name for s in specs], engine.jobs, scenario.execution
+        )
         try:  # from here on, any ending stops the workers and records every candidate
             manager = PruningManager(executor, scenario.pruning, bounds=bounds)
             recorder.update(counts={"optimized": len(survivors), "candidates": len(specs)})
@@ -314,6 +326,16 @@ def _progress_figures(progress: Progress, total: int) -> dict:
         "pruned": progress.pruned,
         "finished": progress.finished,
     }
+
+
+def with_execution(scenario: Scenario, engine: str | None = None, address: str | None = None) -> Scenario:
+    """``scenario`` with its engine and/or Ray address overridden (an address implies ``ray``)."""
+    if engine is None and address is None:
+        return scenario
+    engine = engine or ("ray" if address is not None else scenario.execution.engine)
+    if address is None and engine == scenario.execution.engine:
+        address = scenario.execution.address
+    return replace(scenario, execution=ExecutionSettings(engine, address if engine == "ray" else None))
 
 
 def with_pruning(scenario: Scenario, rule: str | None = None, threshold: float | None = None) -> Scenario:

@@ -56,9 +56,11 @@ Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSe
   such candidates mostly end at the iteration limit. Once a reference exists, a candidate that
   has not been trusted for ``patience`` iterations in a row is pruned.
 
-Where the candidates run is :mod:`~modular_robots.execution`'s business (this process, or worker
-processes that each host several candidates and advance them on command); the manager only
-decides, so its decisions do not depend on the number of workers.
+Where the candidates run is :mod:`~modular_robots.execution`'s business (this process, worker
+processes that each host several candidates and advance them on command, or a Ray actor per
+candidate); the manager only decides, so its decisions do not depend on the number of workers or
+the engine. A candidate whose worker dies under it (:class:`~modular_robots.execution.Lost`) is
+reported ``failed`` with the reason, and the others go on.
 """
 
 from __future__ import annotations
@@ -66,9 +68,9 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
-from .execution import Executor
+from .execution import Executor, Lost
 from .ocp.candidate import CandidateResult, CandidateStatus
 from .ocp.solver import Iterate
 from .scenario import PruningSettings
@@ -266,6 +268,8 @@ class PruningManager:
                 finished = []
                 for name in alive:
                     ended, value = stepped[name]
+                    if isinstance(value, Lost):
+                        value = self._lost(name, value.reason)
                     if ended:
                         self.results[name] = value
                         finished.append(name)
@@ -327,6 +331,17 @@ class PruningManager:
         for _ in self.rounds():
             pass
         return list(self.results.values())
+
+    def _lost(self, name: str, reason: str) -> CandidateResult:
+        """The result of a candidate whose worker died: ``failed``, after the iterations it had
+        reported."""
+        own = self.last[name].iteration if name in self.last else 0
+        return replace(
+            CandidateResult.never_started(name),
+            status=CandidateStatus.FAILED,
+            reason=f"{reason} (after {own} iteration(s))",
+            iterations=own,
+        )
 
     def _stop(self, names: list[str]) -> dict[str, CandidateResult]:
         return {

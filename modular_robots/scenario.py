@@ -10,8 +10,17 @@ from pathlib import Path
 from ._yamlio import Fields, load_yaml
 from .catalog import Catalog, catalog_from_fields, load_catalog
 from .exceptions import InputError, ScenarioError, shorten
+from .execution import ENGINES, ExecutionSettings
 
-__all__ = ["SphereObstacle", "Task", "OptimizerSettings", "PruningSettings", "Scenario", "load_scenario"]
+__all__ = [
+    "SphereObstacle",
+    "Task",
+    "OptimizerSettings",
+    "PruningSettings",
+    "ExecutionSettings",
+    "Scenario",
+    "load_scenario",
+]
 
 COSTS = ("time", "effort")
 RULES = ("ratio", "paper", "none")
@@ -115,6 +124,8 @@ class Scenario:
     optimizer: OptimizerSettings = field(default_factory=OptimizerSettings)
     pruning: PruningSettings = field(default_factory=PruningSettings)
     path: Path | None = None
+    #: Where steps B-D run (``execution: {engine, address}``; the command line overrides it).
+    execution: ExecutionSettings = field(default_factory=ExecutionSettings)
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -151,8 +162,9 @@ def _scenario_from_fields(top: Fields) -> Scenario:
     task = _read_task(top.mapping("task"))
     optimizer = _read_optimizer(top.mapping("optimizer", default=None))
     pruning = _read_pruning(top.mapping("pruning", default=None))
+    execution = _read_execution(top.mapping("execution", default=None))
     top.done()
-    return Scenario(name, catalog, task, optimizer, pruning, path)
+    return Scenario(name, catalog, task, optimizer, pruning, path, execution)
 
 
 def _read_task(f: Fields) -> Task:
@@ -237,6 +249,19 @@ def _read_pruning(f: Fields | None) -> PruningSettings:
     )
     f.done()
     return settings
+
+
+def _read_execution(f: Fields | None) -> ExecutionSettings:
+    if f is None:
+        return ExecutionSettings()
+    engine = f.string("engine", default=ExecutionSettings.engine, choices=ENGINES)
+    address = f.string("address", default=None)
+    if address is not None and engine != "ray":
+        raise f.fail("address", "only the ray engine connects to a cluster; set engine: ray, or remove the key")
+    if address is not None and (address != address.strip() or len(address) > 300):
+        raise f.fail("address", f"expected a Ray address (auto, host:port or ray://host:port), got {shorten(address)}")
+    f.done()
+    return ExecutionSettings(engine, address)
 
 
 def load_scenario_or_catalog(path: str | Path) -> tuple[Scenario | None, Catalog]:

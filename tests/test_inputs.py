@@ -301,6 +301,24 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         ),
         ("rule: ratio", "rule: greedy", "rule:", "pruning.rule: expected one of ratio, paper, none; got 'greedy'"),
         (
+            "optimizer:",
+            "execution:\n  engine: spark\noptimizer:",
+            "engine:",
+            "execution.engine: expected one of process, ray; got 'spark'",
+        ),
+        (
+            "optimizer:",
+            "execution:\n  address: auto\noptimizer:",
+            "address:",
+            "execution.address: only the ray engine connects to a cluster; set engine: ray, or remove the key",
+        ),
+        (
+            "optimizer:",
+            "execution:\n  engine: ray\n  cluster: big\noptimizer:",
+            "cluster:",
+            "execution.cluster: unknown key (expected one of: address, engine)",
+        ),
+        (
             "threshold: 0.5",
             "threshold: 0.5\n  patience: -1",
             "patience:",
@@ -342,6 +360,9 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         "loose-tolerance",
         "threshold-type",
         "unknown-rule",
+        "unknown-engine",
+        "address-without-ray",
+        "execution-unknown-key",
         "negative-patience",
         "lookahead-type",
         "obstacle-contains-base",
@@ -355,6 +376,12 @@ def test_scenario_errors_name_file_line_key(tmp_path, old, new, needle, message)
         load_scenario(path)
     line = _line(path.read_text(), needle)
     assert str(info.value) == f"{path}:{line}: {message.format(dir=tmp_path)}"
+
+
+def test_a_scenario_chooses_its_engine(tmp_path):
+    path = _scenario(tmp_path, "optimizer:", "execution:\n  engine: ray\n  address: 'head:6379'\noptimizer:")
+    execution = load_scenario(path).execution
+    assert (execution.engine, execution.address) == ("ray", "head:6379")
 
 
 def test_catalogue_error_inside_a_scenario_names_the_catalogue(tmp_path):
@@ -408,5 +435,6 @@ def test_shipped_scenarios_load():
         2,
     )
     assert (paper.pruning.window, paper.pruning.lookahead, paper.pruning.patience) == (16, 2.0, 75)  # defaults
+    assert (paper.execution.engine, paper.execution.address) == ("process", None)  # the default
     five = load_scenario(PAPER_SCENARIO.with_name("paper-5kg.yaml"))
     assert five.task.payload == 5.0 and five.task.obstacles == paper.task.obstacles and five.catalog == paper.catalog

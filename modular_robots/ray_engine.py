@@ -1,0 +1,337 @@
+"""Steps B-D on a Ray cluster (``--engine ray``): the :class:`~modular_robots.execution.Engine`
+and :class:`~modular_robots.execution.Executor` of :mod:`~modular_robots.execution`, on Ray.
+
+* :class:`RayEngine` (step B) streams chunks of compositions to Ray tasks, at most ``window``
+  chunks per CPU of the cluster in flight, and yields the verdicts back in input order: neither
+  the driver nor the cluster ever holds more than a few chunks, however large the space.
+* :class:`RayExecutor` (steps C+D) hosts every candidate in a Ray actor of its own, created when
+  the candidate is first advanced and spread over the cluster's machines; the actor keeps the
+  candidate's generator and advances it by one iteration on command, so the pruning manager runs
+  the same lockstep, with the same decisions, as on worker processes. A pruned or finished
+  candidate's actor is killed. An actor that dies (killed, out of memory, its machine gone) ends
+  its candidate as :class:`~modular_robots.execution.Lost`, which the manager reports as
+  ``failed`` with the reason; the run goes on.
+
+Ray is imported only when this module is, i.e. when the engine is chosen; without it,
+:class:`~modular_robots.exceptions.EngineError` says how to install it. Every node of a cluster
+needs the same ``modular-robots`` installed (``pip install modular-robots[ray]``): tasks and
+actors import it there.
+
+With no address, the engine starts a Ray instance of this process's own (``jobs`` CPUs, no
+dashboard) and shuts it down when closed; with an address (``auto`` for the cluster started on
+this machine by ``ray start --head``, or ``host:port``) it connects to that cluster and leaves it
+running. A process already connected to Ray (``ray.init`` called by the caller) is used as it is.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+import os
+import signal
+import threading
+import uuid
+from collections import deque
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from threadpoolctl import threadpool_limits
+
+from .exceptions import EngineError, shorten
+from .execution import ENDING, InProcessExecutor, Lost, _chunks
+
+try:
+    import ray
+    from ray._private import ray_constants
+except ImportError:  # said when the engine is chosen (_require)
+    ray = ray_constants = None
+
+__all__ = ["RayEngine", "RayExecutor", "connect", "start_local", "disconnect", "STOP_SECONDS"]
+
+#: How long stopping a candidate waits for its actor to finish the iteration it is in [s]; an
+#: actor that does not answer by then is killed and its candidate recorded as stopped.
+STOP_SECONDS = 60.0
+
+#: Whether this process started the Ray instance it is connected to (then it shuts it down).
+_session = {"started": False}
+
+
+def _require():
+    if ray is None:
+        raise EngineError(
+            "the ray engine needs Ray, which is not installed: pip install 'modular-robots[ray]' "
+            "(or use --engine process)"
+        )
+    return ray
+
+
+def connect(address: str | None = None, jobs: int = 1) -> int:
+    """Connect this process to Ray (once) and return the cluster's CPUs.
+
+    Parameters
+    ----------
+    address
+        A running cluster (``auto``, ``host:port``, ``ray://host:port``); None starts a Ray
+        instance of this process's own with ``jobs`` CPUs.
+    jobs
+        CPUs of the instance started when ``address`` is None.
+
+    Raises
+    ------
+    EngineError
+        If Ray is not installed or the cluster cannot be reached.
+    """
+    _require()
+    if not ray.is_initialized():
+        with _signals_kept():  # ray.init makes SIGTERM exit at once: the run records its ending instead
+            try:
+                if address is None:
+                    start_local(jobs)
+                    _session["started"] = True
+                else:
+                    ray.init(address=address, logging_level=logging.WARNING)
+            except (ConnectionError, ValueError, RuntimeError, TimeoutError) as exc:
+                raise EngineError(
+                    f"cannot connect to the Ray cluster at {shorten(address)}: {shorten(str(exc), 300, quote=False)} "
+                    "(start one with `ray start --head`, or leave out --address for a Ray instance of this run's own)"
+                ) from None
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+def start_local(cpus: int) -> None:
+    """Start a Ray instance of this process's own with ``cpus`` CPUs and connect to it: one node,
+    on the loopback address only (no other machine joins it), without the dashboard. The
+    process's signal handlers stay its own (``ray.init`` makes ``SIGTERM`` exit at once).
+
+    Ray binds a node to the machine's network address unless told it is not a cluster
+    (``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``, which its processes inherit; a cluster of several
+    machines is started with ``ray start`` and reached with an address instead)."""
+    _require()
+    previous = (os.environ.get(_CLUSTER_VARIABLE), ray_constants.ENABLE_RAY_CLUSTER)
+    os.environ[_CLUSTER_VARIABLE] = "0"
+    ray_constants.ENABLE_RAY_CLUSTER = False
+    try:
+        with _signals_kept():
+            ray.init(address="local", num_cpus=cpus, include_dashboard=False, logging_level=logging.WARNING)
+    finally:
+        ray_constants.ENABLE_RAY_CLUSTER = previous[1]
+        if previous[0] is None:
+            os.environ.pop(_CLUSTER_VARIABLE, None)
+        else:
+            os.environ[_CLUSTER_VARIABLE] = previous[0]
+
+
+#: The variable that keeps a Ray node on the loopback address (see :func:`start_local`).
+_CLUSTER_VARIABLE = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+def disconnect() -> None:
+    """Shut down the Ray instance this process started (a cluster it connected to runs on)."""
+    if ray is not None and _session["started"] and ray.is_initialized():
+        with _signals_kept():
+            ray.shutdown()
+    _session["started"] = False
+
+
+@contextlib.contextmanager
+def _signals_kept():
+    """Keep this process's handlers of the ending signals across a Ray call that sets its own."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {signum: signal.getsignal(signum) for signum in ENDING}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            if signal.getsignal(signum) is not handler and handler is not None:
+                signal.signal(signum, handler)
+
+
+# -- in the workers -----------------------------------------------------------------------------
+_WORKER: dict[str, Any] = {"blas": False, "key": None, "context": None}
+
+
+def _one_blas_thread() -> None:
+    """BLAS and OpenMP use one thread in a Ray worker, as in a worker process
+    (:func:`~modular_robots.execution.single_threaded_blas`): the same arithmetic, the same
+    iterates."""
+    if not _WORKER["blas"]:
+        threadpool_limits(limits=1)
+        _WORKER["blas"] = True
+
+
+def _run_chunk(work: Callable, boxed: list, chunk: list) -> list:
+    """A Ray task: ``work(context, chunk)``. The context comes boxed (a reference in a list, which
+    Ray does not resolve) and is fetched once per worker and stream, not once per chunk."""
+    _one_blas_thread()
+    reference = boxed[0]
+    if _WORKER["key"] != reference.hex():
+        _WORKER["context"] = ray.get(reference)
+        _WORKER["key"] = reference.hex()
+    return work(_WORKER["context"], chunk)
+
+
+class _Host:
+    """A Ray actor hosting one job (an :class:`~modular_robots.execution.InProcessExecutor` of
+    one)."""
+
+    def __init__(self, factory: Callable[[Any, Any], Any], context: Any, spec: Any, name: str):
+        _one_blas_thread()
+        self._name = name
+        self._executor = InProcessExecutor(factory, context, [spec], [name])
+
+    def advance(self) -> tuple[bool, Any]:
+        return self._executor.advance([self._name])[self._name]
+
+    def stop(self) -> Any:
+        return self._executor.stop([self._name])[self._name]
+
+
+@functools.cache
+def _remote():
+    """The remote task and actor class (made once Ray is imported)."""
+    return ray.remote(num_cpus=1)(_run_chunk), ray.remote(max_restarts=0, max_task_retries=0)(_Host)
+
+
+# -- on the driver ------------------------------------------------------------------------------
+class RayEngine:
+    """Step B's chunks as Ray tasks (one CPU each); results in input order, at most
+    ``window`` chunks per cluster CPU in flight.
+
+    Parameters
+    ----------
+    address
+        A running cluster, or None for a Ray instance of this process's own (see :func:`connect`).
+    jobs
+        CPUs of that own instance.
+    window
+        Chunks in flight per CPU: enough to keep every CPU busy while results travel back.
+    """
+
+    def __init__(self, address: str | None = None, jobs: int = 1, window: int = 4):
+        _require()
+        self.address, self._jobs, self.window = address, jobs, window
+
+    @property
+    def jobs(self) -> int:
+        """The CPUs of the cluster (connecting to it)."""
+        return connect(self.address, self._jobs)
+
+    def map_chunks(self, work, context, items, chunksize=16):
+        cpus = self.jobs
+        task, _ = _remote()
+        boxed = [ray.put(context)]
+        pending: deque = deque()
+        try:
+            for chunk in _chunks(items, chunksize):
+                pending.append(task.remote(work, boxed, chunk))
+                if len(pending) >= cpus * self.window:
+                    yield from ray.get(pending.popleft())
+            while pending:
+                yield from ray.get(pending.popleft())
+        finally:
+            for reference in pending:
+                with contextlib.suppress(Exception):
+                    ray.cancel(reference)
+
+    def close(self) -> None:
+        disconnect()
+
+
+def _death(exc: Exception) -> str:
+    """The first line of Ray's account of an actor's death, without its traceback."""
+    text = str(exc).strip()
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    detail = next((line for line in lines if "died" in line or "killed" in line or "exit" in line.lower()), None)
+    return shorten(detail or (lines[0] if lines else type(exc).__name__), 300, quote=False)
+
+
+class RayExecutor:
+    """Every job in a Ray actor of its own (see the module docstring); decisions stay with the
+    caller, so they are those of the other executors.
+
+    Parameters
+    ----------
+    factory, context, specs, names
+        As for :func:`~modular_robots.execution.make_executor`: job ``names[i]`` is
+        ``factory(context, specs[i])``, built in its actor when first advanced.
+    address, jobs
+        The cluster (see :func:`connect`).
+    """
+
+    def __init__(
+        self,
+        factory: Callable[[Any, Any], Any],
+        context: Any,
+        specs: Sequence[Any],
+        names: Sequence[str],
+        address: str | None = None,
+        jobs: int = 1,
+    ):
+        _require()
+        connect(address, jobs)
+        self._names = list(names)
+        self._specs = dict(zip(self._names, specs))
+        self._factory = factory
+        self._context = ray.put(context)
+        self._actors: dict[str, Any] = {}
+        #: Actors are named ``modular-robots/<run>/<candidate>`` (unique per run): visible as such
+        #: in Ray's tools (``ray list actors``).
+        self.run_id = uuid.uuid4().hex[:12]
+
+    def names(self) -> list[str]:
+        return list(self._names)
+
+    def actor_name(self, name: str) -> str:
+        """The Ray name of job ``name``'s actor."""
+        return f"modular-robots/{self.run_id}/{name}"
+
+    def _actor(self, name: str):
+        if name not in self._actors:
+            _, host = _remote()
+            self._actors[name] = host.options(name=self.actor_name(name), scheduling_strategy="SPREAD").remote(
+                self._factory, self._context, self._specs.pop(name), name
+            )
+        return self._actors[name]
+
+    def advance(self, names):
+        calls = {name: self._actor(name).advance.remote() for name in names}  # all at once: one round
+        try:
+            out = dict(zip(calls, ray.get(list(calls.values()))))  # one wait for the whole round
+        except ray.exceptions.RayActorError:
+            out = {}
+            for name, call in calls.items():  # which actor died, and the others' steps
+                try:
+                    out[name] = ray.get(call)
+                except ray.exceptions.RayActorError as exc:
+                    out[name] = (True, Lost(f"its Ray actor died: {_death(exc)}"))
+        for name, (ended, _) in out.items():
+            if ended:
+                self._release(name)
+        return out
+
+    def stop(self, names):
+        calls = {name: self._actors[name].stop.remote() for name in names if name in self._actors}
+        out = {}
+        try:
+            for name in names:
+                out[name] = None
+                if name in calls:
+                    with contextlib.suppress(ray.exceptions.RayActorError, ray.exceptions.GetTimeoutError):
+                        out[name] = ray.get(calls[name], timeout=STOP_SECONDS)
+        finally:
+            for name in names:
+                self._release(name)
+        return out
+
+    def shutdown(self) -> None:
+        for name in list(self._actors):
+            self._release(name)
+
+    def _release(self, name: str) -> None:
+        actor = self._actors.pop(name, None)
+        if actor is not None:
+            with contextlib.suppress(Exception):
+                ray.kill(actor, no_restart=True)

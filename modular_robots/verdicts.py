@@ -1,0 +1,162 @@
+"""Step B's verdicts as a JSON Lines file, written as they come and resumed after an interruption
+(``filter --verdicts FILE``).
+
+The first line says what the verdicts are of (:func:`fingerprint`: the scenario's task, its
+catalogue and step B's settings); then one line per composition, in step A's order, each flushed
+as soon as its verdict is known, so a space of millions is never held in memory and an
+interrupted ``filter`` loses at most the line it was writing. Resuming reads the lines back
+(checking that each is of the next composition of the space), drops a last line cut short, and
+checks only the compositions after them: the file and the summary end as those of an
+uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO
+
+from .composition import Composition
+from .exceptions import InputError, shorten
+from .feasibility import FeasibilitySettings, Verdict
+from .scenario import Scenario
+
+__all__ = ["VerdictFile", "fingerprint", "verdict_from_json", "FORMAT"]
+
+#: The ``verdicts`` version of the first line.
+FORMAT = 1
+
+
+def fingerprint(scenario: Scenario, settings: FeasibilitySettings) -> str:
+    """What step B's verdicts depend on (the task, the catalogue, the settings), as a short hash."""
+    text = repr((scenario.catalog, scenario.task, settings))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _tuple(values) -> tuple[float, ...] | None:
+    return tuple(float(v) for v in values) if values is not None else None
+
+
+def verdict_from_json(document: dict, composition: Composition) -> Verdict:
+    """The :class:`~modular_robots.feasibility.Verdict` a line of the file holds
+    (:meth:`~modular_robots.feasibility.Verdict.to_json` and its ``seconds``)."""
+    clear = document.get("clear_pair")
+    return Verdict(
+        composition,
+        document["failed_test"],
+        document["message"],
+        dict(document["figures"]),
+        dict(document.get("seconds", {})),
+        _tuple(document.get("q_start")),
+        _tuple(document.get("q_goal")),
+        document.get("time_bound"),
+        (_tuple(clear[0]), _tuple(clear[1])) if clear else None,
+    )
+
+
+class VerdictFile:
+    """The verdicts file ``path`` for ``scenario`` under ``settings``: a context manager that
+    opens it for appending (creating it with its first line if it is missing or empty).
+
+    Raises
+    ------
+    InputError
+        If the file holds the verdicts of another scenario, catalogue or settings, or is not a
+        verdicts file.
+    """
+
+    def __init__(self, path: str | Path, scenario: Scenario, settings: FeasibilitySettings):
+        self.path = Path(path)
+        self.header = {"verdicts": FORMAT, "scenario": scenario.name, "of": fingerprint(scenario, settings)}
+        self._file: IO[str] | None = None
+        self._line = 1
+
+    def __enter__(self) -> VerdictFile:
+        complete = self._complete_length()
+        self._file = open(self.path, "a+", encoding="utf-8")  # closed in __exit__
+        self._file.truncate(complete)  # a last line cut short by an interruption
+        self._file.seek(0)
+        first = self._file.readline()
+        if not first:
+            self._file.write(json.dumps(self.header) + "\n")
+            self._file.flush()
+        else:
+            self._check_header(first)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def _complete_length(self) -> int:
+        """The length of the file's complete lines (0 if it is missing)."""
+        if not self.path.exists():
+            return 0
+        with open(self.path, "rb") as raw:
+            size = raw.seek(0, os.SEEK_END)
+            position = size
+            while position > 0:
+                step = min(65536, position)
+                raw.seek(position - step)
+                block = raw.read(step)
+                newline = block.rfind(b"\n")
+                if newline >= 0:
+                    return position - step + newline + 1
+                position -= step
+        return 0
+
+    def _fail(self, line: int, message: str) -> InputError:
+        return InputError(f"{shorten(str(self.path), 200, quote=False)}:{line}: {message}")
+
+    def _check_header(self, first: str) -> None:
+        try:
+            header = json.loads(first)
+        except ValueError:
+            header = None
+        if not isinstance(header, dict) or header.get("verdicts") != FORMAT:
+            raise self._fail(1, "not a verdicts file of this version; choose another file")
+        if header != self.header:
+            raise self._fail(
+                1,
+                f"the verdicts of another scenario, catalogue or step-B settings ({shorten(header.get('scenario'))}, "
+                f"{shorten(header.get('of'))}; this run is {self.header['scenario']!r}, {self.header['of']!r}): "
+                "remove the file or choose another",
+            )
+
+    def recorded(self, compositions: Iterator[Composition]) -> Iterator[Verdict]:
+        """The verdicts already in the file, each drawn with the next composition of
+        ``compositions`` (the space being checked), which it must be of. The file is left at its
+        end, ready for :meth:`write`."""
+        assert self._file is not None, "use VerdictFile as a context manager"
+        self._file.seek(0)
+        self._file.readline()
+        self._line = 1
+        for text in self._file:
+            self._line += 1
+            try:
+                document = json.loads(text)
+                name = document["composition"]
+            except (ValueError, KeyError, TypeError):
+                raise self._fail(
+                    self._line, "not a verdict; the file is damaged: remove it or choose another"
+                ) from None
+            composition = next(compositions, None)
+            if composition is None or composition.name != name:
+                expected = composition.name if composition is not None else "the end of the space (or of --limit)"
+                raise self._fail(
+                    self._line,
+                    f"the verdict of {shorten(name)} where the space has {expected}: the file is of another space",
+                )
+            yield verdict_from_json(document, composition)
+
+    def write(self, verdict: Verdict) -> None:
+        """Append ``verdict`` as a line, flushed."""
+        document = verdict.to_json()
+        document["seconds"] = verdict.seconds
+        self._file.write(json.dumps(document, separators=(",", ":")) + "\n")
+        self._file.flush()
+        self._line += 1
