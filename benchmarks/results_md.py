@@ -268,8 +268,8 @@ def _engines_lines() -> list[str]:
         "Estimated wall time on N machines of 2 cores, from the measured costs (step B: the Ray run's CPU "
         "seconds per assembly over every core; steps C+D: the small run's lockstep, ceil(alive / cores) "
         f"iterations of {_fmt(run['seconds_per_iteration'])} s per round plus Ray's empty round; it stops "
-        "falling once every live candidate has a core: a round waits for its slowest candidate). The IMPROV "
-        "columns use the paper catalogue's cost per assembly until they are measured on IMPROV:",
+        "falling once every live candidate has a core: a round waits for its slowest candidate); step B's "
+        f"cost per assembly is `{doc['scenario']}`'s:",
         "",
     ]
     keys = list(doc["estimate"][0])
@@ -278,14 +278,16 @@ def _engines_lines() -> list[str]:
         lines.append("| " + " | ".join(_fmt(r[k]) for k in keys) + " |")
     lines += [
         "",
-        "Peak resident memory (largest process) as the streamed space grows (paper catalogue widened to 8 DOF):",
+        "Peak resident memory (largest process) as the streamed space grows (the paper catalogue widened to 8 DOF; "
+        "IMPROV's full space counted, its 4-joint and Science Robotics 2019 spaces listed, a prefix of the latter "
+        "filtered):",
         "",
         "| command | assemblies | peak RSS MB | wall s |",
         "|---|---|---|---|",
     ]
     for r in doc["memory"]:
         lines.append(f"| {r['command']} | {r['assemblies']:,} | {r['peak_rss_mb']:.0f} | {_fmt(r['wall_s'])} |")
-    lines += ["", f"Pending: {doc['pending']}.", ""]
+    lines += ["", f"Pending: {doc['pending']}.", ""] if doc.get("pending") else [""]
     return lines
 
 
