@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import itertools
+import json
 import math
 import subprocess
 import sys
@@ -32,7 +33,7 @@ from modular_robots.execution import ExecutionSettings, ProcessEngine, ProcessEx
 from modular_robots.feasibility import filter_compositions
 from modular_robots.pipeline import run_scenario
 
-from ._common import table, write
+from ._common import RESULTS, table, write
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "paper-5kg.yaml"
@@ -208,14 +209,41 @@ def _peak_mb(*command: str) -> tuple[float, float]:
     return int(out.split()[0]) / 1024, time.perf_counter() - start
 
 
-def memory(folder: Path) -> list[dict]:
-    """Peak RSS of ``enumerate`` and ``filter`` as the space or the streamed prefix grows, on the
-    paper catalogue widened to 8 DOF (671,844 assemblies) and on IMPROV (the 40,985,620-assembly
-    space counted; its Science Robotics 2019 space listed and a prefix of it filtered)."""
+def _wide_scenario(folder: Path) -> Path:
+    """The paper task on the paper catalogue widened to 8 DOF (671,844 assemblies), in ``folder``."""
     catalog = (ROOT / "scenarios" / "catalogs" / "paper.yaml").read_text().replace("dof: [2, 5]", "dof: [2, 8]")
     (folder / "wide.yaml").write_text(catalog)
     scenario = SCENARIO.read_text().replace("catalogs/paper.yaml", str(folder / "wide.yaml"))
     (folder / "wide-5kg.yaml").write_text(scenario)
+    return folder / "wide-5kg.yaml"
+
+
+def filter_prefix(limit: int) -> dict:
+    """Peak RSS of ``filter --limit LIMIT`` on the widened paper space, added to ``engines.json``'s
+    memory rows (``python -m benchmarks.bench_engines --filter-prefix 1000000``: about 25 minutes
+    on 2 cores)."""
+    with tempfile.TemporaryDirectory() as folder:
+        scenario = _wide_scenario(Path(folder))
+        mb, wall = _peak_mb(
+            CLI, "filter", str(scenario), "--jobs", "2", "--limit", str(limit),
+            "--verdicts", str(Path(folder) / "prefix.jsonl"), "--max-compositions", "100000000",
+        )  # fmt: skip
+    row = {"command": "filter --jobs 2 --limit", "assemblies": limit, "peak_rss_mb": mb, "wall_s": wall}
+    path = RESULTS / "engines.json"
+    doc = json.loads(path.read_text())
+    doc["memory"] = [
+        r for r in doc["memory"] if r != row and not (r["command"] == row["command"] and r["assemblies"] == limit)
+    ]
+    doc["memory"].append(row)
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+    return row
+
+
+def memory(folder: Path) -> list[dict]:
+    """Peak RSS of ``enumerate`` and ``filter`` as the space or the streamed prefix grows, on the
+    paper catalogue widened to 8 DOF (671,844 assemblies) and on IMPROV (the 40,985,620-assembly
+    space counted; its Science Robotics 2019 space listed and a prefix of it filtered)."""
+    _wide_scenario(folder)
     space = sum(count_compositions(load_scenario(folder / "wide-5kg.yaml").catalog).values())
     rows = []
     for label, listed, options in (("enumerate --dof 6", 15_552, ["--dof", "6"]), ("enumerate", space, [])):
@@ -285,8 +313,12 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", type=Path, default=SCENARIO)
     parser.add_argument("--limit", type=int, default=None, help="only the first LIMIT compositions")
+    parser.add_argument("--filter-prefix", type=int, default=None, help="only measure filter --limit N's memory")
     arguments = parser.parse_args()
     from modular_robots.execution import single_threaded_blas
 
     with single_threaded_blas():
-        main(arguments.scenario, arguments.limit)
+        if arguments.filter_prefix:
+            print(filter_prefix(arguments.filter_prefix))
+        else:
+            main(arguments.scenario, arguments.limit)
