@@ -207,6 +207,8 @@ def _profile_lines() -> list[str]:
         "| where | " + " | ".join(f"commit `{d['commit']}` s (share)" for d in shown) + " |",
         "|---|" + "---|" * len(shown),
     ]
+    if before and before.get("note"):
+        lines[4:4] = [f"The earlier profile was {before['note']}.", ""]
     names = [r["where"] for r in after["rows"]]
     for name in names:
         cells = []
