@@ -7,6 +7,10 @@ solver iteration, :meth:`ShootingSolver.close` stops the solver cleanly (its cal
 ``StopIteration``) and joins the thread, and :meth:`ShootingSolver.solve` runs to the end. Only
 one of the two threads runs at any moment, so the problem's Pinocchio data is never shared.
 A solver failure never raises into the caller: the generator ends and :attr:`outcome` says why.
+
+Importing this module replaces ``scipy.sparse.linalg.factorized`` (which trust-constr calls to
+factor its augmented system) by a wrapper: in a solver's thread it factors with
+:data:`SUPERLU_OPTIONS`, anywhere else it is SciPy's own function, unchanged.
 """
 
 from __future__ import annotations
