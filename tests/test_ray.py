@@ -28,6 +28,8 @@ from modular_robots.execution import ExecutionSettings, make_engine, make_execut
 from modular_robots.pipeline import run_scenario, with_execution
 from modular_robots.scenario import load_scenario
 
+from .conftest import start_run
+
 ray = pytest.importorskip("ray")
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,22 +67,11 @@ def test_a_signal_to_a_ray_run_is_recorded_as_an_interruption(tmp_path, signum):
     """``run --engine ray`` starts a Ray instance of its own; Ray's own SIGTERM handler must not
     make the run exit without recording its ending."""
     out = tmp_path / "out"
-    child = subprocess.Popen(
-        [*CLI, "run", str(SMALL), "--engine", "ray", "--jobs", "2", "--out", str(out)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    child = start_run(
+        out,
+        ["--engine", "ray", "--jobs", "2"],
+        lambda document: any(c["iterations"] for c in document["candidates"]),
     )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and child.poll() is None:
-        try:
-            document = json.loads((out / "result.json").read_text())
-            if document["candidates"] and any(c["iterations"] for c in document["candidates"]):
-                break
-        except (OSError, ValueError, KeyError):
-            pass
-        time.sleep(0.05)
     child.send_signal(signum)
     _, stderr = child.communicate(timeout=120)
     assert child.returncode == 128 + signum, stderr

@@ -36,7 +36,7 @@ from modular_robots.pipeline import run_scenario
 from modular_robots.recorder import previous_files
 from modular_robots.robot import robot_model
 
-from .conftest import ROOT
+from .conftest import ROOT, start_run
 
 SMALL = ROOT / "tests" / "data" / "small.yaml"
 SMALL_TEXT = SMALL.read_text()
@@ -77,23 +77,7 @@ def _processes_of(out: Path) -> list[int]:
 
 def _run_until_step_c(out: Path, jobs: int, **popen) -> subprocess.Popen:
     """``run`` of the small scenario into ``out``, once its step C has started."""
-    child = subprocess.Popen(
-        [*CLI, "run", str(SMALL), "--jobs", str(jobs), "--out", str(out)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        **popen,
-    )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and child.poll() is None:
-        try:
-            if "candidates" in _document(out)["counts"]:  # step C has started
-                break
-        except (OSError, ValueError):
-            pass
-        time.sleep(0.02)
-    return child
+    return start_run(out, ["--jobs", str(jobs)], lambda document: "candidates" in document["counts"], **popen)
 
 
 # -- 1. every termination is recorded ------------------------------------------------------------
