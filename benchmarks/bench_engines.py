@@ -33,7 +33,7 @@ from modular_robots.execution import ExecutionSettings, ProcessEngine, ProcessEx
 from modular_robots.feasibility import filter_compositions
 from modular_robots.pipeline import run_scenario
 
-from ._common import RESULTS, table, write
+from ._common import RESULTS, commit, table, write
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "paper-5kg.yaml"
@@ -209,32 +209,34 @@ def _peak_mb(*command: str) -> tuple[float, float]:
     return int(out.split()[0]) / 1024, time.perf_counter() - start
 
 
-def _wide_scenario(folder: Path, dof: int = 8) -> Path:
+def _wide_scenario(folder: Path, dof: int = 8, low: int = 2) -> Path:
     """The paper task on the paper catalogue widened to ``dof`` DOF (8: 671,844 assemblies; 9:
-    4,031,076), in ``folder``."""
-    catalog = (ROOT / "scenarios" / "catalogs" / "paper.yaml").read_text().replace("dof: [2, 5]", f"dof: [2, {dof}]")
+    4,031,076; from ``low`` = 9 to 9: the 3,359,232 nine-joint chains), in ``folder``."""
+    paper = (ROOT / "scenarios" / "catalogs" / "paper.yaml").read_text()
+    catalog = paper.replace("dof: [2, 5]", f"dof: [{low}, {dof}]")
     (folder / "wide.yaml").write_text(catalog)
     scenario = SCENARIO.read_text().replace("catalogs/paper.yaml", str(folder / "wide.yaml"))
     (folder / "wide-5kg.yaml").write_text(scenario)
     return folder / "wide-5kg.yaml"
 
 
-def filter_prefix(limit: int) -> dict:
+def filter_prefix(limit: int, low: int = 2) -> dict:
     """Peak RSS of ``filter --limit LIMIT`` on the paper space widened to 9 DOF (4,031,076
-    assemblies), added to ``engines.json``'s memory rows
-    (``python -m benchmarks.bench_engines --filter-prefix 1000000``: about half an hour on 2 cores)."""
+    assemblies; ``low`` = 9: its nine-joint chains only, the longest models and 40 % survivors),
+    added to ``engines.json``'s memory rows
+    (``python -m benchmarks.bench_engines --filter-prefix 1000000``: about half an hour on 2 cores).
+    """
     with tempfile.TemporaryDirectory() as folder:
-        scenario = _wide_scenario(Path(folder), dof=9)
+        scenario = _wide_scenario(Path(folder), dof=9, low=low)
         mb, wall = _peak_mb(
             CLI, "filter", str(scenario), "--jobs", "2", "--limit", str(limit),
             "--verdicts", str(Path(folder) / "prefix.jsonl"), "--max-compositions", "100000000",
         )  # fmt: skip
-    row = {"command": "filter --jobs 2 --limit (9 DOF)", "assemblies": limit, "peak_rss_mb": mb, "wall_s": wall}
+    label = "filter --jobs 2 --limit (9 DOF)" if low == 2 else f"filter --jobs 2 --limit ({low} to 9 DOF)"
+    row = {"command": label, "assemblies": limit, "peak_rss_mb": mb, "wall_s": wall, "commit": commit()}
     path = RESULTS / "engines.json"
     doc = json.loads(path.read_text())
-    doc["memory"] = [
-        r for r in doc["memory"] if r != row and not (r["command"] == row["command"] and r["assemblies"] == limit)
-    ]
+    doc["memory"] = [r for r in doc["memory"] if not (r["command"] == label and r["assemblies"] == limit)]
     doc["memory"].append(row)
     path.write_text(json.dumps(doc, indent=2) + "\n")
     return row
@@ -314,12 +316,16 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", type=Path, default=SCENARIO)
     parser.add_argument("--limit", type=int, default=None, help="only the first LIMIT compositions")
-    parser.add_argument("--filter-prefix", type=int, default=None, help="only measure filter --limit N's memory")
+    parser.add_argument(
+        "--filter-prefix", type=int, nargs="+", default=None, help="only measure filter --limit N's memory, for each N"
+    )
+    parser.add_argument("--prefix-low-dof", type=int, default=2, help="the widened space's smallest DOF (9: 9 only)")
     arguments = parser.parse_args()
     from modular_robots.execution import single_threaded_blas
 
     with single_threaded_blas():
         if arguments.filter_prefix:
-            print(filter_prefix(arguments.filter_prefix))
+            for prefix in arguments.filter_prefix:
+                print(filter_prefix(prefix, arguments.prefix_low_dof), flush=True)
         else:
             main(arguments.scenario, arguments.limit)

@@ -123,6 +123,8 @@ class _Number(click.ParamType):
 #: Linux's limits on a file or folder name (``NAME_MAX``) and on a whole path (``PATH_MAX``, its
 #: final NUL included) [bytes].
 NAME_MAX, PATH_MAX = 255, 4096
+#: Survivors ``filter`` prints (the smallest time bounds); without ``--out`` it holds no more.
+SURVIVOR_ROWS = 25
 
 
 def _path_problem(path: Path) -> str | None:
@@ -412,7 +414,10 @@ def import_timor_command(modules_json: Path, overrides: Path | None, output: Pat
     type=str,
     callback=_file_name("JSON"),
     default=None,
-    help="Write the verdict summary and the survivors with their boundary configurations as JSON.",
+    help=(
+        "Write the verdict summary and the survivors with their boundary configurations as JSON "
+        "(holds every survivor in memory; --verdicts streams)."
+    ),
 )
 @click.option(
     "--verdicts",
@@ -450,7 +455,8 @@ def filter_command(
     runner = make_engine(jobs, scenario.execution)
     try:
         total = _space(scenario, runner.jobs, max_compositions, limit)
-        summary = FeasibilitySummary()
+        # --out lists every survivor; otherwise the table's best are all a stream of millions keeps
+        summary = FeasibilitySummary(keep=None if out is not None else SURVIVOR_ROWS)
         start = time.perf_counter()
         compositions = itertools.islice(enumerate_compositions(scenario.catalog), total)
         with (
@@ -474,17 +480,17 @@ def filter_command(
     wall = time.perf_counter() - start
     click.echo(_feasibility_table(summary))
     click.echo(
-        f"{len(summary.survivors)} of {summary.checked} compositions are feasible "
+        f"{summary.feasible} of {summary.checked} compositions are feasible "
         f"({wall:.1f} s wall, {jobs} worker(s)"
         + (f"; {resumed} verdict(s) read back from {verdicts}" if resumed else "")
         + ")"
     )
-    if summary.survivors:
+    if summary.feasible:
         click.echo(_survivor_table(summary))
     if out is not None:
         atomic_write(out, json.dumps(_feasibility_json(scenario, settings, summary, wall, jobs), indent=1) + "\n")
         click.echo(f"wrote {out}")
-    if not summary.survivors:
+    if not summary.feasible:
         raise InfeasibleError(summary.diagnosis())
 
 
@@ -670,10 +676,10 @@ def _run_table(result, scenario) -> str:
             f"terminal error {v.terminal_error * 1000:.3f} mm, min clearance "
             f"{v.min_clearance:.4f} m, {w.substeps} sub-steps",
         ),
-        ("compositions", f"{result.feasibility.checked} enumerated, {len(result.feasibility.survivors)} feasible"),
+        ("compositions", f"{result.feasibility.checked} enumerated, {result.feasibility.feasible} feasible"),
         (
             "candidates",
-            f"{len(statuses)} optimised ({len(result.feasibility.survivors)} compositions, "
+            f"{len(statuses)} optimised ({result.feasibility.feasible} compositions, "
             f"{sum(c.boundary_pair == BoundaryPair.CLEAR for c in result.candidates)} also from a clear pair): "
             f"{statuses.count('optimal')} optimal, "
             f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed",
@@ -721,16 +727,16 @@ def _feasibility_table(summary: FeasibilitySummary) -> str:
     return "\n".join(lines)
 
 
-def _survivor_table(summary: FeasibilitySummary, limit: int = 25) -> str:
-    ranked = sorted(summary.survivors, key=lambda v: v.time_bound)
+def _survivor_table(summary: FeasibilitySummary) -> str:
+    ranked, limit = sorted(summary.survivors, key=lambda v: v.time_bound), SURVIVOR_ROWS
     lines = [f"{'composition':<34} {'dof':>3} {'time bound s':>12} {'torque ratio':>12} {'clearance m':>11}"]
     for v in ranked[:limit]:
         lines.append(
             f"{v.composition.name:<34} {v.composition.dof:>3} {v.time_bound:>12.3f} "
             f"{v.figures['torque_ratio']:>12.3f} {v.figures['clearance']:>11.3f}"
         )
-    if len(ranked) > limit:
-        lines.append(f"... and {len(ranked) - limit} more (see --out)")
+    if summary.feasible > limit:
+        lines.append(f"... and {summary.feasible - limit} more (see --out)")
     return "\n".join(lines)
 
 

@@ -21,6 +21,7 @@ velocity-limited lower bound on motion time are kept for step C.
 from __future__ import annotations
 
 import functools
+import heapq
 import itertools
 import math
 import time
@@ -530,23 +531,47 @@ def filter_compositions(
 
 @dataclass
 class FeasibilitySummary:
-    """Counts, CPU seconds per test and the closest misses of a stream of verdicts."""
+    """Counts, CPU seconds per test and the closest misses of a stream of verdicts.
 
+    Parameters
+    ----------
+    keep
+        How many survivors to hold: all of them (``None``: what step C needs), or the ``keep``
+        with the smallest time bounds, so that a stream of millions of verdicts is summarised in
+        bounded memory (a survivor with its IK solutions holds a few kilobytes; 40 % of the
+        nine-joint chains of the paper's catalogue survive).
+    """
+
+    keep: int | None = None
     checked: int = 0
+    feasible: int = 0
     removed: dict[str, int] = field(default_factory=lambda: {t: 0 for t in TEST_NAMES})
     seconds: dict[str, float] = field(default_factory=lambda: {t: 0.0 for t in ("model",) + TEST_NAMES})
-    survivors: list[Verdict] = field(default_factory=list)
     best_torque_ratio: float = math.inf
     best_torque_miss: str = ""
     smallest_ik_error: float = math.inf
     smallest_ik_miss: str = ""
+    _kept: list = field(default_factory=list, repr=False)
+
+    @property
+    def survivors(self) -> list[Verdict]:
+        """The survivors held (all of them unless ``keep`` is set), in input order."""
+        if self.keep is None:
+            return self._kept
+        return [verdict for _, _, verdict in sorted(self._kept, key=lambda entry: -entry[1])]
 
     def add(self, verdict: Verdict) -> None:
         self.checked += 1
         for test, seconds in verdict.seconds.items():
             self.seconds[test] += seconds
         if verdict.passed:
-            self.survivors.append(verdict)
+            self.feasible += 1
+            if self.keep is None:
+                self._kept.append(verdict)
+            elif self.keep > 0:
+                # a max-heap on (time bound, input order): its root is the survivor to let go first
+                entry = (-verdict.time_bound, -self.feasible, verdict)
+                (heapq.heappush if len(self._kept) < self.keep else heapq.heappushpop)(self._kept, entry)
             return
         self.removed[verdict.failed_test] += 1
         figure = verdict.figures
@@ -563,7 +588,7 @@ class FeasibilitySummary:
             "enumerated": self.checked,
             "removed": dict(self.removed),
             "remaining_after": self.remaining_after(),
-            "feasible": len(self.survivors),
+            "feasible": self.feasible,
         }
 
     def remaining_after(self) -> dict[str, int]:
@@ -575,7 +600,7 @@ class FeasibilitySummary:
 
     def diagnosis(self) -> str:
         """Why nothing passed: the test that removed the last candidates and the closest miss."""
-        if self.survivors:
+        if self.feasible:
             return ""
         last = next((t for t in reversed(TEST_NAMES) if self.removed[t]), None)
         if last is None:

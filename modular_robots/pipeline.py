@@ -153,9 +153,9 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
         stream = filter_compositions(scenario, engine=engine, settings=feasibility, max_compositions=max_compositions)
         for verdict in stream:
             summary.add(verdict)
-            notify("feasibility", {"checked": summary.checked, "feasible": len(summary.survivors)})
+            notify("feasibility", {"checked": summary.checked, "feasible": summary.feasible})
         recorder.update(counts=summary.counts(), seconds={"feasibility": time.perf_counter() - start})
-        if not summary.survivors:
+        if not summary.feasible:
             recorder.finish("infeasible", summary.diagnosis())
             raise InfeasibleError(summary.diagnosis())
 

@@ -2,6 +2,7 @@
 
 import dataclasses
 import itertools
+import json
 import math
 
 import numpy as np
@@ -13,6 +14,7 @@ from modular_robots import (
     Composition,
     SphereObstacle,
     Task,
+    cli,
     enumerate_compositions,
     load_scenario,
     robot_model,
@@ -29,7 +31,7 @@ from modular_robots.feasibility import (
 )
 from modular_robots.ik import _lm_steps, ik_seeds, solve_position_ik, solve_position_ik_batch, solve_position_ik_many
 
-from .conftest import PAPER_5KG, PAPER_CATALOG
+from .conftest import PAPER_5KG, PAPER_CATALOG, SMALL
 
 G = 9.81
 
@@ -200,6 +202,25 @@ def test_no_feasible_composition_gives_a_diagnosis(paper_catalog):
 
 
 # -- streaming and workers -------------------------------------------------------------------------
+def test_a_summary_with_keep_holds_the_survivors_with_the_smallest_time_bounds():
+    """A bounded summary (``filter`` on millions) counts like a full one and holds the ``keep``
+    survivors with the smallest time bounds, the earlier of two equal bounds, in input order."""
+    scenario = load_scenario(PAPER_5KG)
+    sample = list(itertools.islice(enumerate_compositions(scenario.catalog, dof=5), 0, None, 8))
+    verdicts = list(filter_compositions(scenario, sample, engine=SerialEngine()))
+    verdicts += verdicts  # every bound twice: the first of each pair is kept
+    full, bounded, empty = FeasibilitySummary(), FeasibilitySummary(keep=5), FeasibilitySummary(keep=0)
+    for verdict in verdicts:
+        for summary in (full, bounded, empty):
+            summary.add(verdict)
+    assert full.feasible == len(full.survivors) > 10
+    assert bounded.counts() == full.counts() == empty.counts() and bounded.seconds == full.seconds
+    passed = [i for i, verdict in enumerate(verdicts) if verdict.passed]
+    best = sorted(sorted(passed, key=lambda i: verdicts[i].time_bound)[:5])  # a stable sort: input order on ties
+    assert bounded.survivors == [verdicts[i] for i in best]
+    assert empty.survivors == [] and empty.diagnosis() == ""
+
+
 def test_same_verdicts_with_one_and_two_workers():
     scenario = load_scenario(PAPER_5KG)
     sample = list(itertools.islice(enumerate_compositions(scenario.catalog, dof=5), 0, None, 40))
@@ -266,3 +287,20 @@ def test_a_clear_pair_is_kept_when_the_fastest_pair_sweeps_through_an_obstacle(p
     assert line_clearance(*verdict.clear_pair) > 0.0
     blocked = _check(paper_catalog, "B-J1-L3-J1-L2-J1-L1-J1-L1-E2", scenario.task)  # no pair is clear
     assert blocked.passed and blocked.clear_pair is None
+
+
+def test_filter_without_out_prints_the_same_survivors_holding_only_those_it_prints(tmp_path, monkeypatch):
+    """Without ``--out``, ``filter`` holds only the survivors it prints (a stream of millions
+    stays in bounded memory), and prints what it prints with ``--out``, which lists all of them."""
+    monkeypatch.setattr(cli, "SURVIVOR_ROWS", 4)
+    out = tmp_path / "feasible.json"
+    bounded = CliRunner().invoke(main, ["filter", str(SMALL), "--jobs", "1"])
+    full = CliRunner().invoke(main, ["filter", str(SMALL), "--jobs", "1", "--out", str(out)])
+    assert bounded.exit_code == full.exit_code == 0
+    table = lambda text: text[text.index("composition ") :].splitlines()  # noqa: E731
+    assert table(full.output)[:-1] == table(bounded.output) and table(full.output)[-1] == f"wrote {out}"
+    assert len(table(bounded.output)) == 1 + 4 + 1 and table(bounded.output)[-1] == "... and 2 more (see --out)"
+    assert "6 of 516 compositions are feasible" in bounded.output
+    survivors = json.loads(out.read_text())["survivors"]
+    assert [s["composition"] for s in survivors[:4]] == [line.split()[0] for line in table(bounded.output)[1:5]]
+    assert len(survivors) == 6
