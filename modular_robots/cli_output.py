@@ -1,0 +1,138 @@
+"""What the command line prints and writes: its tables, its live status line and ``filter``'s
+JSON."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from .feasibility import TEST_NAMES, FeasibilitySummary
+from .ocp.candidate import BoundaryPair
+from .report import RESULT
+
+__all__ = [
+    "LiveLine",
+    "SURVIVOR_ROWS",
+    "feasibility_json",
+    "feasibility_table",
+    "run_table",
+    "survivor_table",
+    "written_files",
+]
+
+#: Survivors ``filter`` prints (the smallest time bounds); without ``--out`` it holds no more.
+SURVIVOR_ROWS = 25
+
+
+def written_files(out: Path) -> str:
+    """The files of the results folder ``out``, as its ``result.json`` lists them."""
+    document = json.loads((out / RESULT).read_text())
+    files = (document.get("winner") or {}).get("files", {})
+    return f"{out}/ ({', '.join([RESULT, *files.values()])})"
+
+
+def run_table(result, scenario) -> str:
+    """The summary ``run`` and ``optimize`` print: the winner, its verification, the counts and times."""
+    w = result.winner
+    statuses = [c.status for c in result.candidates]
+    v = w.verification
+    rows = [
+        (
+            "winner",
+            w.composition
+            + ("" if w.boundary_pair == BoundaryPair.FASTEST else f" (from its {w.boundary_pair} boundary pair)"),
+        ),
+        ("tf [s]", f"{w.tf:.4f}"),
+        (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
+        (
+            "verification",
+            f"terminal error {v.terminal_error * 1000:.3f} mm, min clearance "
+            f"{v.min_clearance:.4f} m, {w.substeps} sub-steps",
+        ),
+        ("compositions", f"{result.feasibility.checked} enumerated, {result.feasibility.feasible} feasible"),
+        (
+            "candidates",
+            f"{len(statuses)} optimised ({result.feasibility.feasible} compositions, "
+            f"{sum(c.boundary_pair == BoundaryPair.CLEAR for c in result.candidates)} also from a clear pair): "
+            f"{statuses.count('optimal')} optimal, "
+            f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed",
+        ),
+        ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),
+        ("wall time [s]", ", ".join(f"{k} {s:.1f}" for k, s in result.seconds.items())),
+    ]
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {value}" for k, value in rows)
+
+
+class LiveLine:
+    """One status line on stderr, rewritten in place on a terminal (every 10th update otherwise)."""
+
+    def __init__(self):
+        self.tty = sys.stderr.isatty()
+        self.count = 0
+        self.text = ""
+
+    def __enter__(self):
+        return self
+
+    def show(self, text: str) -> None:
+        self.count += 1
+        self.text = text
+        if self.tty:
+            click.echo(f"\r\033[K{text}", nl=False, err=True)
+        elif self.count % 10 == 1:
+            click.echo(text, err=True)
+
+    def __exit__(self, *exc):
+        if self.tty and self.count:
+            click.echo("", err=True)
+        elif self.text and self.count % 10 != 1:
+            click.echo(self.text, err=True)
+        return False
+
+
+def feasibility_table(summary: FeasibilitySummary) -> str:
+    """Step B's cascade: what each test removed, what remained and its CPU seconds."""
+    remaining = summary.remaining_after()
+    lines = [f"{'test':<20} {'removed':>8} {'remaining':>10} {'cpu s':>8}"]
+    for test in TEST_NAMES:
+        lines.append(f"{test:<20} {summary.removed[test]:>8} {remaining[test]:>10} {summary.seconds[test]:>8.2f}")
+    lines.append(f"{'(model building)':<20} {'':>8} {'':>10} {summary.seconds['model']:>8.2f}")
+    return "\n".join(lines)
+
+
+def survivor_table(summary: FeasibilitySummary, limit: int = SURVIVOR_ROWS) -> str:
+    """The ``limit`` survivors with the smallest time bounds, and how many more there are."""
+    ranked = sorted(summary.survivors, key=lambda v: v.time_bound)
+    lines = [f"{'composition':<34} {'dof':>3} {'time bound s':>12} {'torque ratio':>12} {'clearance m':>11}"]
+    for v in ranked[:limit]:
+        lines.append(
+            f"{v.composition.name:<34} {v.composition.dof:>3} {v.time_bound:>12.3f} "
+            f"{v.figures['torque_ratio']:>12.3f} {v.figures['clearance']:>11.3f}"
+        )
+    if summary.feasible > limit:
+        lines.append(f"... and {summary.feasible - limit} more (see --out)")
+    return "\n".join(lines)
+
+
+def feasibility_json(scenario, settings, summary, wall, jobs) -> dict:
+    """``filter --out``'s document: the settings, the counts and every survivor held, by time bound."""
+    return {
+        "scenario": scenario.name,
+        "settings": {
+            "seeds": settings.seeds,
+            "tolerance": settings.tolerance,
+            "max_iterations": settings.max_iterations,
+            "jobs": jobs,
+        },
+        "enumerated": summary.checked,
+        "removed": summary.removed,
+        "remaining": summary.remaining_after(),
+        "cpu_seconds": summary.seconds,
+        "wall_seconds": wall,
+        "diagnosis": summary.diagnosis(),
+        "survivors": [v.to_json() for v in sorted(summary.survivors, key=lambda v: v.time_bound)],
+    }
