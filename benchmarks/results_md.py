@@ -282,13 +282,17 @@ def _engines_lines() -> list[str]:
         "",
         "Peak resident memory (largest process) as the streamed space grows (the paper catalogue widened to 8 DOF; "
         "IMPROV's full space counted, its 4-joint and Science Robotics 2019 spaces listed, a prefix of the latter "
-        "filtered):",
+        "filtered; `--filter-prefix` rows: the paper catalogue widened to 9 DOF, from 2 or from 9 DOF, measured on "
+        "the commit named, by the engines run's commit otherwise):",
         "",
-        "| command | assemblies | peak RSS MB | wall s |",
-        "|---|---|---|---|",
+        "| command | assemblies | peak RSS MB | wall s | commit |",
+        "|---|---|---|---|---|",
     ]
     for r in doc["memory"]:
-        lines.append(f"| {r['command']} | {r['assemblies']:,} | {r['peak_rss_mb']:.0f} | {_fmt(r['wall_s'])} |")
+        lines.append(
+            f"| {r['command']} | {r['assemblies']:,} | {r['peak_rss_mb']:.0f} | {_fmt(r['wall_s'])} "
+            f"| {r.get('commit', '')} |"
+        )
     lines += ["", f"Pending: {doc['pending']}.", ""] if doc.get("pending") else [""]
     return lines
 
