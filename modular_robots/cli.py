@@ -386,7 +386,7 @@ def run_command(
                 reference = "-" if f["best_cost"] is None else f"{f['best_cost']:.4g}"
                 live.show(
                     f"steps C+D: iteration {f['round']}, {f['alive']} of {f['total']} alive, best verified "
-                    f"cost {best}, pruning reference {reference}"
+                    f"cost {best}, best trusted cost {reference}"
                 )
 
         result = run_scenario(scenario, out, jobs, on_progress=progress, max_compositions=max_compositions)

@@ -35,7 +35,7 @@ def written_files(out: Path) -> str:
 
 
 def run_table(result, scenario) -> str:
-    """The summary ``run`` and ``optimize`` print: the winner, its verification, the counts and times."""
+    """The summary ``run`` prints: the winner, its verification, the counts and times."""
     w = result.winner
     statuses = [c.status for c in result.candidates]
     v = w.verification

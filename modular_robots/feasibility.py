@@ -439,7 +439,7 @@ def _boundary_pair(robot: RobotModel, collision: CollisionModel, starts, goals):
     (None otherwise).
 
     Step C optimises from both pairs, as two candidates (see
-    :func:`~modular_robots.ocp.candidate.composition_problem` for why neither alone suffices). Joint
+    :func:`~modular_robots.ocp.candidate.make_candidate` for why neither alone suffices). Joint
     limits of the paper catalogue do not allow wrapping through +-pi, so the shortest way within
     limits is the plain difference.
     """
@@ -539,7 +539,7 @@ class FeasibilitySummary:
         How many survivors to hold: all of them (``None``: what step C needs), or the ``keep``
         with the smallest time bounds, so that a stream of millions of verdicts is summarised in
         bounded memory (a survivor with its IK solutions holds a few kilobytes; 40 % of the
-        nine-joint chains of the paper's catalogue survive).
+        nine-joint chains of the paper's catalogue widened to 9 DOF survive).
     """
 
     keep: int | None = None

@@ -50,7 +50,7 @@ Two refinements of the guard, both in :class:`~modular_robots.scenario.PruningSe
   final cost). So a candidate is judged only when it was already trusted ``window`` iterations
   ago, and it is kept while the fall of its cost over that window, repeated ``lookahead`` more
   times, would bring it back within the threshold: a candidate far above the reference needs a
-  steep fall to be kept, one just above it a gentle one. How the defaults (8, 2) were chosen, on
+  steep fall to be kept, one just above it a gentle one. How the defaults (16, 2) were chosen, on
   replays of brute-force histories, is in ``docs/design-notes.md``.
 * **patience**: a candidate whose iterates are never trusted is never judged by the ratio, and
   such candidates mostly end at the iteration limit. Once a reference exists, a candidate that
@@ -213,9 +213,9 @@ def bound_rule(bounds: Mapping[str, float], converged: Mapping[str, float]) -> d
 
 @dataclass(frozen=True)
 class Progress:
-    """After each round: its number, the candidates still live, the rule's guarded reference
-    ``best_cost`` (the best trusted cost in this round, None before any: it can rise when a
-    trusted iterate loses its trust), who was pruned or finished in this round, and
+    """After each round: its number, the candidates still live, ``best_cost``, the best trusted
+    cost in this round (None before any: it can rise when a trusted iterate loses its trust; the
+    ratio rule's reference only under ``reference: trusted``), who was pruned or finished in this round, and
     ``best_optimal``, the smallest cost of a candidate that has converged so far (None before
     any; it never rises)."""
 
