@@ -220,19 +220,30 @@ def _wide_scenario(folder: Path, dof: int = 8, low: int = 2) -> Path:
     return folder / "wide-5kg.yaml"
 
 
-def filter_prefix(limit: int, low: int = 2) -> dict:
-    """Peak RSS of ``filter --limit LIMIT`` on the paper space widened to 9 DOF (4,031,076
-    assemblies; ``low`` = 9: its nine-joint chains only, the longest models and 40 % survivors),
-    added to ``engines.json``'s memory rows
+def filter_prefix(limit: int, low: int = 2, space: str = "paper") -> dict:
+    """Peak RSS of ``filter --limit LIMIT``, added to ``engines.json``'s memory rows. ``space``
+    ``paper``: the paper space widened to 9 DOF (4,031,076 assemblies; ``low`` = 9: its nine-joint
+    chains only, the longest models and 40 % survivors); ``improv``: IMPROV's 40,985,620-assembly
+    space with ``improv-science2019.yaml``'s task
     (``python -m benchmarks.bench_engines --filter-prefix 1000000``: about half an hour on 2 cores).
     """
     with tempfile.TemporaryDirectory() as folder:
-        scenario = _wide_scenario(Path(folder), dof=9, low=low)
+        if space == "improv":
+            improv = ROOT / "scenarios" / "catalogs" / "improv.yaml"
+            scenario = Path(folder) / "improv-default.yaml"
+            scenario.write_text(
+                IMPROV_SCENARIO.read_text().replace("../scenarios/catalogs/improv-science2019.yaml", str(improv))
+            )
+        else:
+            scenario = _wide_scenario(Path(folder), dof=9, low=low)
         mb, wall = _peak_mb(
             CLI, "filter", str(scenario), "--jobs", "2", "--limit", str(limit),
             "--verdicts", str(Path(folder) / "prefix.jsonl"), "--max-compositions", "100000000",
         )  # fmt: skip
-    label = "filter --jobs 2 --limit (9 DOF)" if low == 2 else f"filter --jobs 2 --limit ({low} to 9 DOF)"
+    if space == "improv":
+        label = "IMPROV default space filter --limit"
+    else:
+        label = "filter --jobs 2 --limit (9 DOF)" if low == 2 else f"filter --jobs 2 --limit ({low} to 9 DOF)"
     row = {"command": label, "assemblies": limit, "peak_rss_mb": mb, "wall_s": wall, "commit": commit()}
     path = RESULTS / "engines.json"
     doc = json.loads(path.read_text())
@@ -320,12 +331,13 @@ if __name__ == "__main__":
         "--filter-prefix", type=int, nargs="+", default=None, help="only measure filter --limit N's memory, for each N"
     )
     parser.add_argument("--prefix-low-dof", type=int, default=2, help="the widened space's smallest DOF (9: 9 only)")
+    parser.add_argument("--prefix-space", choices=("paper", "improv"), default="paper", help="--filter-prefix's space")
     arguments = parser.parse_args()
     from modular_robots.execution import single_threaded_blas
 
     with single_threaded_blas():
         if arguments.filter_prefix:
             for prefix in arguments.filter_prefix:
-                print(filter_prefix(prefix, arguments.prefix_low_dof), flush=True)
+                print(filter_prefix(prefix, arguments.prefix_low_dof, arguments.prefix_space), flush=True)
         else:
             main(arguments.scenario, arguments.limit)
