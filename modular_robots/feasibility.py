@@ -538,7 +538,7 @@ class FeasibilitySummary:
     keep
         How many survivors to hold: all of them (``None``: what step C needs), or the ``keep``
         with the smallest time bounds, so that a stream of millions of verdicts is summarised in
-        bounded memory (a survivor with its IK solutions holds a few kilobytes; 40 % of the
+        bounded memory (a survivor with its IK solutions holds about 1.6 kB; 40 % of the
         nine-joint chains of the paper's catalogue widened to 9 DOF survive).
     """
 
