@@ -7,7 +7,8 @@ spheres. Distances are signed: negative when the shapes overlap (penetration dep
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import fcl
@@ -80,10 +81,12 @@ class CollisionModel:
         self.primitive_indices = tuple(range(len(robot.primitives)) if primitives is None else primitives)
         self._primitives = [robot.primitives[i] for i in self.primitive_indices]
         self._frame_ids = [int(robot.model.getFrameId(p.frame)) for p in self._primitives]
-        self._robot_objects = [
-            fcl.CollisionObject(fcl.Capsule(p.radius, p.length) if p.length > 0 else fcl.Sphere(p.radius))
-            for p in self._primitives
-        ]
+        slots: dict[tuple[float, float], int] = {}
+        self._robot_objects = []
+        for p in self._primitives:
+            shape = (p.radius, p.length)
+            slots[shape] = slot = slots.get(shape, -1) + 1  # same-shape primitives get objects of their own
+            self._robot_objects.append(_shared_object(("primitive", *shape, slot), _primitive_object, p))
         self._prim_radii = np.array([p.radius for p in self._primitives], dtype=float)
         self._prim_lengths = np.array([p.length for p in self._primitives], dtype=float)
         #: Distance from each primitive's frame origin to its axis midpoint, along the frame's z [m].
@@ -99,8 +102,7 @@ class CollisionModel:
         self._centers = np.array([o.center for o in self.obstacles], dtype=float).reshape(-1, 3)
         self._radii = np.array([o.radius for o in self.obstacles], dtype=float)
         self._obstacle_objects = [
-            fcl.CollisionObject(fcl.Sphere(o.radius), fcl.Transform(np.asarray(o.center, dtype=float)))
-            for o in self.obstacles
+            _shared_object(("obstacle", o.radius, *o.center), _obstacle_object, o) for o in self.obstacles
         ]
 
     def distances(self, q: np.ndarray) -> Distances:
@@ -290,6 +292,35 @@ def reach_bound(robot: RobotModel) -> float:
         extent = max(abs(p.offset), abs(p.offset + p.length)) + p.radius
         out = max(out, reach[frame.parentJoint] + np.linalg.norm(frame.placement.translation) + extent)
     return float(out)
+
+
+# python-fcl (0.7) releases a CollisionObject with free() instead of delete, so the shared_ptr to
+# its geometry that the object holds is never destroyed: 32 bytes lost per object (1.5 MB per
+# 50,000 made). Step B makes a collision model for each composition that reaches its collision
+# test, so over millions of compositions a worker grew without bound (0.3 kB per nine-joint chain).
+# The objects are therefore made once per shape (or obstacle) and slot, and shared by the models
+# of a thread: a model places its objects right before every query it makes with them.
+_pool = threading.local()
+#: Objects a thread keeps for reuse; past this many (obstacles of many scenarios) it starts over.
+POOL_SIZE = 4096
+
+
+def _shared_object(key: tuple, make: Callable, item) -> fcl.CollisionObject:
+    objects = getattr(_pool, "objects", None)
+    if objects is None or len(objects) >= POOL_SIZE:
+        objects = _pool.objects = {}
+    found = objects.get(key)
+    if found is None:
+        found = objects[key] = make(item)
+    return found
+
+
+def _primitive_object(p) -> fcl.CollisionObject:
+    return fcl.CollisionObject(fcl.Capsule(p.radius, p.length) if p.length > 0 else fcl.Sphere(p.radius))
+
+
+def _obstacle_object(o: SphereObstacle) -> fcl.CollisionObject:
+    return fcl.CollisionObject(fcl.Sphere(o.radius), fcl.Transform(np.asarray(o.center, dtype=float)))
 
 
 def _separation(a: fcl.CollisionObject, b: fcl.CollisionObject) -> tuple[float, np.ndarray, np.ndarray]:
