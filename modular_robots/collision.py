@@ -295,7 +295,7 @@ def reach_bound(robot: RobotModel) -> float:
 
 
 # python-fcl (0.7) releases a CollisionObject with free() instead of delete, so the shared_ptr to
-# its geometry that the object holds is never destroyed: 32 bytes lost per object (1.5 MB per
+# its geometry that the object holds is never destroyed: about 35 bytes lost per object (1.5 MB per
 # 50,000 made). Step B makes a collision model for each composition that reaches its collision
 # test, so over millions of compositions a worker grew without bound (0.3 kB per nine-joint chain).
 # The objects are therefore made once per shape (or obstacle) and slot, and shared by the models
