@@ -282,8 +282,8 @@ def _engines_lines() -> list[str]:
         "",
         "Peak resident memory (largest process) as the streamed space grows (the paper catalogue widened to 8 DOF; "
         "IMPROV's full space counted, its 4-joint and Science Robotics 2019 spaces listed, a prefix of the latter "
-        "filtered; `--filter-prefix` rows: the paper catalogue widened to 9 DOF, from 2 or from 9 DOF, measured on "
-        "the commit named, by the engines run's commit otherwise):",
+        "filtered; the `--filter-prefix` rows, the paper catalogue widened to 9 DOF from 2 or from 9 DOF and IMPROV's "
+        "default space, name the commit they were measured on; the others are the engines run's):",
         "",
         "| command | assemblies | peak RSS MB | wall s | commit |",
         "|---|---|---|---|---|",
