@@ -551,7 +551,7 @@ class FeasibilitySummary:
     best_torque_miss: str = ""
     smallest_ik_error: float = math.inf
     smallest_ik_miss: str = ""
-    _kept: list = field(default_factory=list, repr=False)
+    _kept: list = field(default_factory=list, init=False, repr=False)
 
     @property
     def survivors(self) -> list[Verdict]:
