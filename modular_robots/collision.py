@@ -140,8 +140,11 @@ class CollisionModel:
         """:meth:`closest` at every row of ``qs`` ``(K, nv)``: distances ``(K, n_obstacles)`` [m]
         and gradients ``(K, n_obstacles, nv)``.
 
-        Bounds from the primitives' axes (vectorised over all configurations) discard the
-        primitives that cannot be the closest; FCL measures the others. The gradient of the
+        The swept-sphere distance of every pair (axis segment to the obstacle's centre, less both
+        radii; vectorised over all configurations) picks, per configuration and obstacle, the
+        primitives within :data:`_BOUND_SLACK` of the closest (several on a tie, such as a joint's
+        sphere and the end of the link capsule beside it); FCL measures those, and the smallest
+        of its distances is the answer. The gradient of the
         distance between a convex primitive and a sphere of centre ``c`` is ``n . dp/dq``: ``n``
         is the unit direction from ``c`` to the obstacle's witness point, ``p`` the robot's
         witness point moving with its frame. With Pinocchio's world-frame joint Jacobian ``J``
@@ -150,12 +153,9 @@ class CollisionModel:
         """
         qs = np.asarray(qs, dtype=float).reshape(-1, self.robot.nv)
         rot, mid, jac = self._placements(qs, derivatives)
-        centers, radii = self._centers, self._radii
-        to_mid = np.linalg.norm(centers[None, None] - mid[:, :, None], axis=3)  # (K, P, O)
-        pad = self._prim_radii[:, None] + radii[None, :]
-        upper = (to_mid - pad).min(axis=1)  # (K, O)
-        lower = to_mid - 0.5 * self._prim_lengths[:, None] - pad
-        measure = lower <= upper[:, None, :] + 1e-12
+        centers = self._centers
+        gap = self._axis_gaps(rot, mid)  # (K, P, O)
+        measure = gap <= gap.min(axis=1, keepdims=True) + _BOUND_SLACK
         dist = np.full(measure.shape, np.inf)
         on_robot = np.zeros(measure.shape + (3,))
         on_obstacle = np.zeros(measure.shape + (3,))
@@ -181,6 +181,16 @@ class CollisionModel:
             "koc,kcv->kov", np.cross(p, normal), jac[:, 3:]
         )
         return closest, grad * self._supports[best]
+
+    def _axis_gaps(self, rot: np.ndarray, mid: np.ndarray) -> np.ndarray:
+        """Distance [m] from each obstacle's centre to each primitive's axis segment, less both
+        radii, ``(K, P, O)``: the distance of a capsule (or sphere) and a sphere, to rounding."""
+        axis = rot[..., 2]  # (K, P, 3)
+        offset = self._centers[None, None] - mid[:, :, None]  # (K, P, O, 3)
+        half = 0.5 * self._prim_lengths[None, :, None]
+        along = np.clip(np.einsum("kpoc,kpc->kpo", offset, axis), -half, half)
+        apart = np.linalg.norm(offset - along[..., None] * axis[:, :, None], axis=3)
+        return apart - self._prim_radii[None, :, None] - self._radii[None, None, :]
 
     def _placements(self, qs: np.ndarray, jacobians: bool):
         """Frame rotations ``(K, P, 3, 3)`` and axis midpoints ``(K, P, 3)`` of the primitives
@@ -323,11 +333,14 @@ def _obstacle_object(o: SphereObstacle) -> fcl.CollisionObject:
     return fcl.CollisionObject(fcl.Sphere(o.radius), fcl.Transform(np.asarray(o.center, dtype=float)))
 
 
+#: FCL only reads a request, so one serves every query.
+_NEAREST_POINTS = fcl.DistanceRequest(enable_nearest_points=True)
+
+
 def _separation(a: fcl.CollisionObject, b: fcl.CollisionObject) -> tuple[float, np.ndarray, np.ndarray]:
     """FCL's (unsigned) distance and nearest points; the distance is negative when they overlap."""
-    request = fcl.DistanceRequest(enable_nearest_points=True)
     result = fcl.DistanceResult()
-    d = fcl.distance(a, b, request, result)
+    d = fcl.distance(a, b, _NEAREST_POINTS, result)
     return d, np.asarray(result.nearest_points[0]), np.asarray(result.nearest_points[1])
 
 

@@ -418,38 +418,6 @@ def test_the_margins_give_the_optimum_of_the_reduced_limits(transcription, effor
     assert check.passed and check.torque_ratio <= effort_margin * (1.0 + 1e-3)
 
 
-def test_superlu_ordering_solves_the_augmented_system_like_scipys_default(paper):
-    """The factorisation trust-constr gets in a solver's thread (symmetric ordering) solves its
-    augmented system ``[[I, A^T], [A, 0]]`` as SciPy's default does; outside it is SciPy's own."""
-    import scipy.sparse.linalg
-
-    from modular_robots.ocp import solver as solver_module
-
-    problem = paper(MIXED, "inverse", obstacles=True)
-    # The Jacobian with a slack column per row, as trust-constr's barrier problem has it.
-    jacobian = problem.evaluate(perturbed_guess(problem, seed=2)).jacobian
-    slacks = np.random.default_rng(5).uniform(0.1, 1.0, jacobian.shape[0])
-    A = scipy.sparse.hstack([jacobian, scipy.sparse.diags(slacks)]).tocsr()
-    m, n = A.shape
-    K = scipy.sparse.block_array([[scipy.sparse.eye_array(n), A.T], [A, None]], format="csc")
-    rhs = np.random.default_rng(4).standard_normal(n + m)
-    reference = scipy.sparse.linalg.spsolve(K, rhs)
-    assert scipy.sparse.linalg.factorized is solver_module._factorized
-    results = {}
-
-    def in_solver_thread():
-        solver_module._solver_thread.active = True
-        results["solver"] = scipy.sparse.linalg.factorized(K)(rhs)
-
-    thread = threading.Thread(target=in_solver_thread)
-    thread.start()
-    thread.join()
-    results["other"] = scipy.sparse.linalg.factorized(K)(rhs)
-    for name, solution in results.items():
-        assert np.abs(solution - reference).max() <= 1e-9 * np.abs(reference).max(), name
-    assert np.abs(K @ results["solver"] - rhs).max() <= 1e-9 * np.abs(rhs).max()
-
-
 @pytest.mark.parametrize("case", list(ROTOR_CASES))
 def test_structured_hessian_reaches_the_analytic_minimum_time(case):
     """trust-constr with the exact Hessian of the torque and position rows ends at the same

@@ -1,0 +1,137 @@
+"""trust-constr's projections computed from the barrier structure
+(:mod:`modular_robots.ocp.projections`) against SciPy's own general sparse path and a dense QR,
+on random matrices and on the barrier Jacobian of a real paper-5kg shooting problem, with slacks
+from 1e-9 (a row at its bound near convergence) to 1e3 (a far bound)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy import sparse
+from scipy.optimize._trustregion_constr import equality_constrained_sqp
+from scipy.optimize._trustregion_constr.projections import projections as scipy_projections
+
+from modular_robots.composition import Composition
+from modular_robots.feasibility import check_composition
+from modular_robots.ocp import solver as solver_module
+from modular_robots.ocp.candidate import composition_problem
+from modular_robots.ocp.projections import SLACK_THRESHOLD, BarrierKKT, barrier_projections
+from modular_robots.scenario import load_scenario
+
+from .conftest import PAPER_5KG
+
+
+def barrier_jacobian(j_eq, j_ineq, slacks) -> sparse.csr_array:
+    """``[[J_eq, 0], [J_ineq, diag(s)]]`` as trust-constr assembles it."""
+    zeros = sparse.csr_array((j_eq.shape[0], len(slacks)))
+    return sparse.csr_array(sparse.block_array([[j_eq, zeros], [j_ineq, sparse.diags_array(slacks)]]))
+
+
+def slacks(rng, count: int, active: int) -> np.ndarray:
+    """Slacks of an interior point iterate: ``active`` rows near their bound (1e-9 .. 1e-2,
+    fewer than the variables, as in a nondegenerate problem), the others 1e-2 .. 1e3."""
+    s = 10.0 ** rng.uniform(-2.0, 3.0, count)
+    s[rng.choice(count, active, replace=False)] = 10.0 ** rng.uniform(-9.0, -2.0, active)
+    return s
+
+
+def random_case(seed: int, ny: int = 30, me: int = 12, mi: int = 90):
+    rng = np.random.default_rng(seed)
+    j_eq = sparse.random_array((me, ny), density=0.3, random_state=rng) + sparse.eye_array(me, ny)
+    j_in = sparse.random_array((mi, ny), density=0.15, random_state=rng)
+    return barrier_jacobian(sparse.csr_array(j_eq), sparse.csr_array(j_in), slacks(rng, mi, ny - me - 4)), ny
+
+
+def paper_barrier_jacobian():
+    """A paper-5kg candidate's constraint Jacobian, as trust-constr's canonical form has it:
+    continuity rows as equalities, every two-sided row and variable bound twice (``+`` and ``-``)."""
+    scenario = load_scenario(PAPER_5KG)
+    composition = Composition.from_name("B-J1-L3-J1-L2-J1-L3-J2-L2-E1", scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    problem = composition_problem(
+        composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
+    )
+    jac = problem.evaluate(problem.initial_guess()).jacobian
+    equal = problem.constraint_lower == problem.constraint_upper
+    j_eq, j_rows = jac[np.flatnonzero(equal)], jac[np.flatnonzero(~equal)]
+    eye = sparse.eye_array(problem.n_variables, format="csr")
+    j_in = sparse.csr_array(sparse.vstack([j_rows, -j_rows, eye, -eye]))
+    active = problem.n_variables - j_eq.shape[0] - 4
+    return barrier_jacobian(j_eq, j_in, slacks(np.random.default_rng(7), j_in.shape[0], active)), problem.n_variables
+
+
+@pytest.fixture(scope="module")
+def paper_case():
+    return paper_barrier_jacobian()
+
+
+def assert_same_projections(A, ny, seed=0, tol=1e-9):
+    """Ours equal the dense QR of ``A^T`` (``A^T = Q R``: ``Z = I - Q Q^T``, ``Y = Q R^-T``,
+    ``LS = R^-1 Q^T``), and so does SciPy's path, less closely: on the paper case (condition number
+    4e9) its unrefined multipliers ``LS`` are 2e-9 off, ours 3e-11."""
+    m, n = A.shape
+    q, r = scipy.linalg.qr(A.toarray().T, mode="economic")
+    rng = np.random.default_rng(seed)
+    x, y = rng.standard_normal(n), rng.standard_normal(m)
+    qr = (
+        x - q @ (q.T @ x),
+        scipy.linalg.solve_triangular(r, q.T @ x),
+        q @ scipy.linalg.solve_triangular(r, y, trans="T"),
+    )
+    ours, theirs = barrier_projections(A, ny), scipy_projections(A)
+    for name, a, b, v, expected in zip(("Z", "LS", "Y"), ours, theirs, (x, x, y), qr):
+        scale = np.linalg.norm(expected)
+        assert np.linalg.norm(a @ v - expected) <= tol * scale, name
+        assert np.linalg.norm(b @ v - expected) <= 10 * tol * scale, name  # the references agree
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_random_barrier_matrices_project_like_scipy(seed):
+    A, ny = random_case(seed)
+    assert_same_projections(A, ny, seed)
+
+
+def test_paper_problem_projects_like_scipy(paper_case):
+    A, ny = paper_case
+    kkt = BarrierKKT(A, ny)
+    small = int(np.sum(kkt.s < SLACK_THRESHOLD))
+    assert 0 < small < len(kkt.s)  # both kinds of row are exercised
+    assert kkt.dense_size == ny + (A.shape[0] - len(kkt.s)) + small
+    assert_same_projections(A, ny)
+
+
+def test_a_matrix_without_the_barrier_structure_is_refused():
+    A, ny = random_case(3)
+    with pytest.raises(ValueError, match="slack columns are not one diagonal block under the equality rows"):
+        BarrierKKT(A, ny - 1)  # a variable column taken for a slack one
+    twice = sparse.csr_array(np.array([[1.0, 2.0, 0.0, 0.0], [1.0, 2.0, 0.0, 0.0]]))  # one row, twice
+    j_in = sparse.csr_array(np.array([[0.0, 1.0, 1.0, 0.0], [0.0, 0.0, 1.0, 1.0]]))
+    singular = barrier_jacobian(twice, j_in, np.array([1.0, 1e-3]))
+    with pytest.raises(ValueError, match="singular"):
+        BarrierKKT(singular, 4)
+
+
+def test_trust_constr_gets_them_only_in_a_solver_thread():
+    """In a solver's thread ``projections`` is the structured one where ``A`` has the structure,
+    SciPy's elsewhere; outside, SciPy's for every matrix."""
+    assert equality_constrained_sqp.projections is solver_module._projections
+    A, ny = random_case(4)
+    plain = sparse.csr_array(np.random.default_rng(4).standard_normal((5, 9)))
+    x = np.random.default_rng(5).standard_normal(A.shape[1])
+    seen = {}
+
+    def in_solver_thread():
+        solver_module._solver_thread.n_variables = ny
+        seen["structured"] = solver_module._projections(A)[0] @ x
+        seen["plain"] = solver_module._projections(plain)[0] @ np.ones(9)
+
+    thread = threading.Thread(target=in_solver_thread)
+    thread.start()
+    thread.join()
+    reference = scipy_projections(A)[0] @ x
+    assert np.allclose(seen["structured"], reference, rtol=0, atol=1e-10)
+    assert np.allclose(seen["plain"], scipy_projections(plain)[0] @ np.ones(9), rtol=0, atol=1e-12)
+    assert getattr(solver_module._solver_thread, "n_variables", None) is None
