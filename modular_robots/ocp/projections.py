@@ -59,7 +59,8 @@ class BarrierKKT:
     """
 
     def __init__(self, A, n_variables: int, threshold: float = SLACK_THRESHOLD):
-        A = sparse.csr_array(A)
+        A = A if isinstance(A, sparse.csr_array) else sparse.csr_array(A)
+        A.sort_indices()
         m, n = A.shape
         ny = n_variables
         mi = n - ny
@@ -67,40 +68,47 @@ class BarrierKKT:
         if mi < 0 or me < 0:
             raise ValueError(f"A of shape {A.shape} has no barrier structure for {ny} variables")
         self.A, self.shape, self.ny, self.me, self.mi = A, (m, n), ny, me, mi
-        left = A[:, :ny]
-        slack_block = A[:, ny:].tocoo()
+        # The slack entries, straight from the CSR arrays: one per inequality row, on the diagonal.
+        per_row = np.diff(A.indptr)
+        slack = A.indices >= ny
         if not (
-            slack_block.nnz == mi
-            and np.array_equal(np.sort(slack_block.row), np.arange(me, m))
-            and np.array_equal(slack_block.col[np.argsort(slack_block.row)], np.arange(mi))
+            np.count_nonzero(slack) == mi
+            and np.array_equal(np.repeat(np.arange(m), per_row)[slack], np.arange(me, m))
+            and np.array_equal(A.indices[slack], np.arange(ny, n))
         ):
             raise ValueError("A's slack columns are not one diagonal block under the equality rows")
-        s = np.empty(mi)
-        s[slack_block.row - me] = slack_block.data
-        self.s = s
-        j_eq = left[:me].toarray()
-        j_in = left[me:]
-        small = np.abs(s) < threshold
-        self._large, self._small = np.flatnonzero(~small), np.flatnonzero(small)
-        j_large = j_in[self._large]
-        self._j_large, self._s_large = j_large, s[self._large]
-        self._j_small, self._s_small = j_in[self._small].toarray(), s[self._small]
-        weighted = sparse.diags_array(1.0 / self._s_large) @ j_large  # S^-1 J on large slacks
-        self._weighted_t = weighted.T.tocsr()
-        self._a_t = A.T.tocsr()
+        self.s = s = A.data[slack]
+        shift = np.concatenate([np.zeros(me + 1, dtype=A.indptr.dtype), np.arange(1, mi + 1, dtype=A.indptr.dtype)])
+        j = sparse.csr_array((A.data[~slack], A.indices[~slack], A.indptr - shift), shape=(m, ny))
+        j_in = j[me:]
+        large = np.abs(s) >= threshold
+        self._small = np.flatnonzero(~large)
+        #: 1/s on the eliminated rows, 0 on the others (whose rows the dense system keeps)
+        self._inv_s = np.divide(1.0, s, out=np.zeros(mi), where=large)
+        self._large = large.astype(float)
+        self._j_in = j_in
+        weighted = sparse.csr_array(  # S^-1 J on eliminated rows, zero rows elsewhere
+            (j_in.data * np.repeat(self._inv_s, np.diff(j_in.indptr)), j_in.indices, j_in.indptr), shape=j_in.shape
+        )
+        self._weighted_t = weighted.T
+        self._a_t = A.T
+        self._s_small = s[self._small]
+        j_small = j_in[self._small].toarray()
+        j_eq = j[:me].toarray()
         k = len(self._small)
         size = ny + me + k
         kkt = np.zeros((size, size))
-        kkt[:ny, :ny] = (weighted.T @ weighted).toarray()
+        dense = weighted.toarray()
+        kkt[:ny, :ny] = dense.T @ dense  # BLAS beats a sparse product here (0.27 vs 0.40 ms)
         kkt[np.arange(ny), np.arange(ny)] += 1.0
         kkt[:ny, ny : ny + me] = j_eq.T
         kkt[ny : ny + me, :ny] = j_eq
-        kkt[:ny, ny + me :] = self._j_small.T
-        kkt[ny + me :, :ny] = self._j_small
+        kkt[:ny, ny + me :] = j_small.T
+        kkt[ny + me :, :ny] = j_small
         kkt[np.arange(ny + me, size), np.arange(ny + me, size)] = -(self._s_small**2)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)  # singular: raised below
-            self._lu = scipy.linalg.lu_factor(kkt, check_finite=False)
+            self._lu = scipy.linalg.lu_factor(kkt, overwrite_a=True, check_finite=False)
         if not np.all(np.diagonal(self._lu[0])):
             raise ValueError("the augmented system is singular (dependent constraint rows)")
 
@@ -124,20 +132,16 @@ class BarrierKKT:
         return z, w
 
     def _solve_once(self, r: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        ny, me = self.ny, self.me
+        ny, me, small, inv_s = self.ny, self.me, self._small, self._inv_s
         r_x, r_u = r[:ny], r[ny:]
         t_eq, t_in = t[:me], t[me:]
-        large, small = self._large, self._small
-        s_large, s_small = self._s_large, self._s_small
-        g = t_in[large] / s_large - r_u[large]  # S^-1 (t_in - S r_u) on large slacks
-        rhs = np.concatenate([r_x + self._weighted_t @ g, t_eq, t_in[small] - s_small * r_u[small]])
+        g = t_in * inv_s - r_u * self._large  # S^-1 (t_in - S r_u) on eliminated rows
+        rhs = np.concatenate([r_x + self._weighted_t @ g, t_eq, t_in[small] - self._s_small * r_u[small]])
         w = scipy.linalg.lu_solve(self._lu, rhs, check_finite=False)
         x = w[:ny]
-        l_in = np.empty(self.mi)
+        l_in = (self._j_in @ x - t_in) * inv_s**2 + r_u * inv_s
         l_in[small] = w[ny + me :]
-        l_in[large] = (self._j_large @ x - t_in[large]) / s_large**2 + r_u[large] / s_large
-        z = np.concatenate([x, r_u - self.s * l_in])
-        return z, np.concatenate([w[ny : ny + me], l_in])
+        return np.concatenate([x, r_u - self.s * l_in]), np.concatenate([w[ny : ny + me], l_in])
 
 
 def barrier_projections(A, n_variables: int, max_refin: int = 3):
