@@ -1,7 +1,8 @@
 """Where one step-C solve spends its time: ``cProfile`` of one paper-5kg candidate solved to its
-end, its own time grouped by who does the work (SuperLU inside trust-constr, FCL, the project's
-evaluation, the rest of SciPy/NumPy). Pinocchio's functions are not Python functions that cProfile
-sees: their time counts in the project's evaluation that calls them. The full profile is written beside the JSON as
+end, its own time grouped by who does the work (trust-constr's projections, FCL, the project's
+evaluation, the rest of SciPy/NumPy; SuperLU where a commit before a293e21 is profiled).
+Pinocchio's functions are not Python functions that cProfile sees: their time counts in the
+project's evaluation that calls them. The full profile is written beside the JSON as
 ``profile.prof`` (not committed; open it with ``python -m pstats`` or snakeviz for a flame view).
 
 cProfile adds a cost per Python call, so the Python groups read a little larger than they run.
@@ -33,6 +34,8 @@ def _group(key: tuple[str, int, str]) -> str:
         return "SuperLU factorisation (trust-constr's augmented system)"
     if "'solve' of 'SuperLU'" in name:
         return "SuperLU solves"
+    if filename.endswith("modular_robots/ocp/projections.py") or filename.endswith("linalg/_decomp_lu.py"):
+        return "projections from the barrier structure (modular_robots.ocp.projections, LAPACK)"
     if "fcl" in name or "fcl" in filename or filename.endswith("modular_robots/collision.py"):
         return "FCL and clearance"
     if "modular_robots" in filename:

@@ -201,7 +201,7 @@ def _profile_lines() -> list[str]:
         "",
         f"One solve of {after['composition']} from the default start (`benchmarks/bench_profile.py`), own "
         "time grouped by who does the work"
-        + (", on the commit before the SuperLU ordering and on the current one" if before else "")
+        + (", on an earlier commit and on the current one" if before else "")
         + ". cProfile adds a cost per Python call; wall times depend on the machine's load.",
         "",
         "| where | " + " | ".join(f"commit `{d['commit']}` s (share)" for d in shown) + " |",
@@ -210,6 +210,7 @@ def _profile_lines() -> list[str]:
     if before and before.get("note"):
         lines[4:4] = [f"The earlier profile was {before['note']}.", ""]
     names = [r["where"] for r in after["rows"]]
+    names += [r["where"] for r in (before or {}).get("rows", []) if r["where"] not in names]
     for name in names:
         cells = []
         for d in shown:
