@@ -163,8 +163,8 @@ def barrier_projections(A, n_variables: int, max_refin: int = 3):
     def row_space(x):
         return kkt.solve(zeros_n, np.ravel(x), max_refin)[0]
 
-    return (
-        LinearOperator((n, n), null_space),
-        LinearOperator((m, n), least_squares),
-        LinearOperator((n, m), row_space),
+    return (  # a LinearOperator without a dtype finds it by applying itself to zeros: a solve each
+        LinearOperator((n, n), null_space, dtype=float),
+        LinearOperator((m, n), least_squares, dtype=float),
+        LinearOperator((n, m), row_space, dtype=float),
     )
