@@ -364,7 +364,9 @@ class ShootingSolver:
             options.update(initial_tr_radius=0.1, initial_barrier_parameter=WARM_BARRIER)
         else:
             options.update(initial_barrier_parameter=COLD_BARRIER, initial_barrier_tolerance=COLD_BARRIER)
-        with warnings.catch_warnings():
+        # catch_warnings swaps the process's filters, so with several solver threads in a worker one
+        # thread's exit can restore them under another; NumPy's error state is per thread.
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")  # delta_grad == 0 and similar SR1 notes
             return minimize(
                 lambda y: evaluate(y).cost,
