@@ -114,6 +114,50 @@ def test_a_matrix_without_the_barrier_structure_is_refused():
         BarrierKKT(singular, 4)
 
 
+@pytest.mark.filterwarnings("ignore:Singular Jacobian matrix")  # SciPy's path, on its way to raising
+def test_a_non_finite_matrix_is_refused_so_that_scipy_reports_it():
+    """SciPy's path raises on a NaN Jacobian and trust-constr stops at once; ours must not hand
+    trust-constr NaN projections instead (it would run to its iteration limit)."""
+    A, ny = random_case(5)
+    A.data[3] = np.nan
+    with pytest.raises(ValueError, match="A has non-finite entries"):
+        BarrierKKT(A, ny)
+    seen = {}
+
+    def in_solver_thread():
+        solver_module._solver_thread.n_variables = ny
+        try:
+            solver_module._projections(A)
+        except ValueError as error:
+            seen["error"] = str(error)
+
+    thread = threading.Thread(target=in_solver_thread)
+    thread.start()
+    thread.join()
+    assert seen["error"] == "array must not contain infs or NaNs"
+
+
+def test_a_refinement_that_does_not_help_is_dropped():
+    """Two inequality rows that are nearly each other's negative, both slacks at 1e-8: the reduced
+    system is conditioned like 1/s^2 and refinement makes the residual grow. The solve returns the
+    best of its iterates, never worse than the unrefined one."""
+    rng = np.random.default_rng(0)
+    ny, me = 8, 2
+    j_eq = sparse.csr_array(sparse.random_array((me, ny), density=0.5, random_state=rng) + sparse.eye_array(me, ny))
+    j_in = sparse.random_array((5, ny), density=0.4, random_state=rng).toarray()
+    paired = sparse.csr_array(np.vstack([j_in, -j_in * (1 + 1e-9)]))
+    A = barrier_jacobian(j_eq, paired, np.r_[np.full(5, 1e-8), np.random.default_rng(1).uniform(0.5, 2, 5) * 1e-8])
+    kkt = BarrierKKT(A, ny)
+    m, n = A.shape
+    r, t = np.random.default_rng(3).standard_normal(n), np.zeros(m)
+
+    def residual(z, w):
+        return np.linalg.norm(r - z - A.T @ w) + np.linalg.norm(t - A @ z)
+
+    unrefined = residual(*kkt._solve_once(r, t))
+    assert residual(*kkt.solve(r, t)) <= unrefined
+
+
 def test_trust_constr_gets_them_only_in_a_solver_thread():
     """In a solver's thread ``projections`` is the structured one where ``A`` has the structure,
     SciPy's elsewhere; outside, SciPy's for every matrix."""

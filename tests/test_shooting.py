@@ -24,6 +24,7 @@ import json
 import math
 import threading
 import time
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -618,6 +619,22 @@ def small_problem() -> ShootingProblem:
         [-0.5 + DQ_TRAP],
         settings=OptimizerSettings(nodes=9, substeps=2, transcription="forward"),
     )
+
+
+def test_interleaved_solves_leave_the_warning_filters_as_they_were():
+    """Two solvers advanced in turn (as the lockstep does) leave the process's warning filters as
+    they were: a filter held for a whole solve was restored out of order, leaving an 'ignore
+    everything' behind that silenced the caller's own warnings."""
+    before = list(warnings.filters)
+    first, second = ShootingSolver(small_problem(), max_iterations=5), ShootingSolver(small_problem(), max_iterations=5)
+    a, b = first.iterate(), second.iterate()
+    next(a)
+    next(b)
+    for _ in a:
+        pass
+    for _ in b:
+        pass
+    assert warnings.filters == before
 
 
 def test_iterate_yields_increasing_iterations_then_sets_the_outcome():

@@ -178,10 +178,12 @@ class Candidate:
         removes sampling errors (what a limit or the clearance does between sub-steps shrinks with
         the sub-step squared); a clearance deficit that one refinement did not halve is a link
         crossing an obstacle between two clear sub-steps, which no warm start removes: the
-        candidate is then solved once more, cold, at the refined sub-steps (their clearance rows
-        keep the link from crossing where the coarser ones let it), and refinement stops if that
-        motion crosses too. On paper-5kg that verified B-J1-L3-J1-L2-J2-L3-J1-L1-E2 (83
-        iterations at 8 sub-steps), which crossed an obstacle 28 mm deep before.
+        candidate is then solved once more, cold (from the problem's first guess, the swing
+        guess if one was taken), at the refined sub-steps, whose clearance rows keep the link
+        from crossing where the coarser ones let it; unless that refinement was the last one
+        allowed. The cold motion is refined like any other, and a crossing found after it ends
+        the candidate. On paper-5kg that verified B-J1-L3-J1-L2-J2-L3-J1-L1-E2 (83 iterations
+        at 8 sub-steps), which crossed an obstacle 28 mm deep before.
     jacobian
         ``exact`` or ``finite-difference`` (see :class:`~modular_robots.ocp.solver.ShootingSolver`).
     composition, boundary_pair

@@ -67,6 +67,8 @@ class BarrierKKT:
         me = m - mi
         if mi < 0 or me < 0:
             raise ValueError(f"A of shape {A.shape} has no barrier structure for {ny} variables")
+        if not np.all(np.isfinite(A.data)):
+            raise ValueError("A has non-finite entries")  # SciPy's path raises it to the solver
         self.A, self.shape, self.ny, self.me, self.mi = A, (m, n), ny, me, mi
         # The slack entries, straight from the CSR arrays: one per inequality row, on the diagonal.
         per_row = np.diff(A.indptr)
@@ -119,17 +121,23 @@ class BarrierKKT:
 
     def solve(self, r: np.ndarray, t: np.ndarray, max_refin: int = 3, rtol: float = 1e-12):
         """``(z, w)`` with ``z + A^T w = r`` and ``A z = t``, refined (at most ``max_refin``
-        times) until the residual is below ``rtol`` times the right-hand side's norm."""
+        times) until the residual is below ``rtol`` times the right-hand side's norm; a
+        refinement that does not lower the residual is dropped and ends the refining."""
         z, w = self._solve_once(r, t)
         bound = rtol * (np.linalg.norm(r) + np.linalg.norm(t))
-        for _ in range(max_refin):
+        best, smallest = (z, w), np.inf
+        for k in range(max_refin + 1):
             res_r = r - z - self._a_t @ w
             res_t = t - self.A @ z
-            if np.linalg.norm(res_r) + np.linalg.norm(res_t) <= bound:
+            size = np.linalg.norm(res_r) + np.linalg.norm(res_t)
+            if size >= smallest:
+                break
+            best, smallest = (z, w), size
+            if size <= bound or k == max_refin:
                 break
             dz, dw = self._solve_once(res_r, res_t)
             z, w = z + dz, w + dw
-        return z, w
+        return best
 
     def _solve_once(self, r: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ny, me, small, inv_s = self.ny, self.me, self._small, self._inv_s

@@ -324,7 +324,7 @@ class ShootingSolver:
         exact = self.jacobian == "exact"
         n = problem.n_variables
         zero = sparse.csr_matrix((n, n))
-        objective_hessian = (lambda y: zero) if exact and problem.cost_name == "time" else SR1()
+        objective_hessian = (lambda y: zero) if exact and problem.cost_name == "time" else _SR1()
 
         # With exact Jacobians every point is evaluated with its derivatives at once: trust-constr
         # asks for them at nearly every point whose values it asked for, and a second pass would
@@ -337,7 +337,7 @@ class ShootingSolver:
             clearance_rows = problem.rows_of("clearance")
             constraints = [
                 _rows_constraint(problem, exact_rows, lambda y, v: problem.exact_hessian(y, v, exact_rows)),
-                _rows_constraint(problem, clearance_rows, SR1()),
+                _rows_constraint(problem, clearance_rows, _SR1()),
             ]
             constraints = [c for c in constraints if c is not None]
         else:
@@ -347,7 +347,7 @@ class ShootingSolver:
                     problem.constraint_lower,
                     problem.constraint_upper,
                     jac=problem.constraint_jacobian if exact else "2-point",
-                    hess=SR1(),
+                    hess=_SR1(),
                 )
             ]
         options = {
@@ -364,10 +364,9 @@ class ShootingSolver:
             options.update(initial_tr_radius=0.1, initial_barrier_parameter=WARM_BARRIER)
         else:
             options.update(initial_barrier_parameter=COLD_BARRIER, initial_barrier_tolerance=COLD_BARRIER)
-        # catch_warnings swaps the process's filters, so with several solver threads in a worker one
-        # thread's exit can restore them under another; NumPy's error state is per thread.
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")  # delta_grad == 0 and similar SR1 notes
+        # Floating-point warnings through NumPy's error state, which is per thread: a warnings
+        # filter held for the whole solve would be restored out of order by the lockstep's threads.
+        with np.errstate(all="ignore"):
             return minimize(
                 lambda y: evaluate(y).cost,
                 self.y0,
@@ -379,6 +378,17 @@ class ShootingSolver:
                 callback=self._callback,
                 options=options,
             )
+
+
+class _SR1(SR1):
+    """SciPy's SR1 without its "delta_grad == 0.0" note, issued whenever a step leaves a gradient
+    unchanged (as after a rejected trust-constr step). The filter is held only during an update,
+    which never yields to another solver thread: ``catch_warnings`` swaps the process's filters."""
+
+    def update(self, delta_x, delta_grad):
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "delta_grad == 0.0", UserWarning)
+            super().update(delta_x, delta_grad)
 
 
 def _rows_constraint(problem: ShootingProblem, rows: np.ndarray, hess) -> NonlinearConstraint | None:
