@@ -19,7 +19,7 @@ from .composition import Composition
 from .urdf import PAYLOAD_RADIUS, composition_urdf, link_name
 from .urdf_assembly import assembly_shapes
 
-__all__ = ["Primitive", "RobotModel", "robot_from_urdf", "robot_model", "COULOMB_SMOOTHING"]
+__all__ = ["Primitive", "RobotModel", "robot_from_urdf", "robot_model", "symmetric_from_upper", "COULOMB_SMOOTHING"]
 
 #: Velocity scale of the smooth sign in Coulomb friction, ``coulomb * tanh(v / eps)``
 #: [rad/s | m/s]: above 3 eps (0.03 rad/s) the friction is within 0.5 % of its full value.
@@ -218,7 +218,7 @@ class RobotModel:
     def rnea_derivatives(self, q, v, a) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(dtau/dq, dtau/dv, dtau/da = M)`` at ``(q, v, a)``."""
         dq, dv, da = pin.computeRNEADerivatives(self.model, self.data, q, v, a)
-        da = np.triu(da) + np.triu(da, 1).T
+        da = symmetric_from_upper(da)
         dv = dv.copy()
         if self.has_friction:
             dv[np.diag_indices_from(dv)] += self.friction_derivative(v)
@@ -229,7 +229,7 @@ class RobotModel:
         if self.has_friction:
             tau = np.asarray(tau, dtype=float) - self.friction(v)
         dq, dv, dtau = pin.computeABADerivatives(self.model, self.data, q, v, tau)
-        dtau = np.triu(dtau) + np.triu(dtau, 1).T
+        dtau = symmetric_from_upper(dtau)
         dv = dv.copy()
         if self.has_friction:
             dv -= dtau * self.friction_derivative(v)[None, :]
@@ -247,8 +247,13 @@ class RobotModel:
 
     def mass_matrix(self, q) -> np.ndarray:
         """Joint-space mass matrix ``M(q)`` (symmetric)."""
-        m = pin.crba(self.model, self.data, np.asarray(q, dtype=float))
-        return np.triu(m) + np.triu(m, 1).T
+        return symmetric_from_upper(pin.crba(self.model, self.data, np.asarray(q, dtype=float)))
+
+
+def symmetric_from_upper(upper: np.ndarray) -> np.ndarray:
+    """The symmetric matrices ``(..., n, n)`` whose upper triangles Pinocchio filled (its mass
+    matrix and its inverse, alone or stacked)."""
+    return np.triu(upper) + np.swapaxes(np.triu(upper, 1), -1, -2)
 
 
 def composition_primitives(composition: Composition, catalog: Catalog) -> list[Primitive]:

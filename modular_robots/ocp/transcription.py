@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..robot import RobotModel
+from ..robot import RobotModel, symmetric_from_upper
 
 __all__ = ["Propagation", "Transcription", "ForwardDynamics", "InverseDynamics", "transcription"]
 
@@ -148,7 +148,7 @@ class ForwardDynamics(Transcription):
         for i in range(n_int):
             dq[i], dv[i], minv[i] = pin.computeABADerivatives(model, data, x[i, :nv], x[i, nv:], u[i])
             xdot[i, nv:] = data.ddq
-        minv = _symmetric(minv)
+        minv = symmetric_from_upper(minv)
         if robot.has_friction:
             dv -= minv * robot.friction_derivative(x[:, nv:])[:, None, :]
         K = np.empty_like(X)
@@ -220,19 +220,13 @@ class InverseDynamics(Transcription):
             for j in range(substeps + 1):
                 dq[i, j], dv[i, j], mass[i, j] = pin.computeRNEADerivatives(model, data, q[i, j], v[i, j], u[i])
                 torques[i, j] = data.tau
-        mass = _symmetric(mass)
+        mass = symmetric_from_upper(mass)
         torque_sens = dq @ sens[:, :, :nv] + dv @ sens[:, :, nv:]
         torque_sens[:, :, :, n : n + nv] += mass
         if robot.has_friction:  # motor torque: friction at the sub-step's velocity
             torques += robot.friction(v)
             torque_sens += robot.friction_derivative(v)[..., None] * sens[:, :, nv:]
         return Propagation(states, torques, sens, torque_sens)
-
-
-def _symmetric(upper: np.ndarray) -> np.ndarray:
-    """The symmetric matrices ``(..., n, n)`` whose upper triangles Pinocchio filled (its mass
-    matrix and inverse)."""
-    return np.triu(upper) + np.swapaxes(np.triu(upper, 1), -1, -2)
 
 
 def positive_or_one(values: np.ndarray) -> np.ndarray:
