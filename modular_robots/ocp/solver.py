@@ -12,7 +12,9 @@ Importing this module replaces the ``projections`` function that trust-constr's 
 every iteration by a wrapper: in a solver's thread it computes the projections from the barrier
 subproblem's structure (:func:`~modular_robots.ocp.projections.barrier_projections`, about three
 times cheaper than factoring the whole augmented system with SuperLU); anywhere else, or for a
-matrix without that structure, it is SciPy's own function, unchanged.
+matrix without that structure, it is SciPy's own function, unchanged. It likewise has
+trust-constr build its canonical constraints by gathers in a solver's thread
+(:mod:`~modular_robots.ocp.canonical`; bit-identical values, no sparse indexing per iteration).
 """
 
 from __future__ import annotations
@@ -29,7 +31,9 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
 from scipy.optimize._trustregion_constr import equality_constrained_sqp as _sqp
+from scipy.optimize._trustregion_constr import minimize_trustregion_constr as _trust_constr
 
+from .canonical import GatheredCanonical
 from .projections import barrier_projections
 from .shooting import ShootingProblem
 
@@ -76,6 +80,25 @@ def _projections(A, method=None, orth_tol=1e-12, max_refin=3, tol=1e-15):
 _scipy_projections = getattr(_sqp.projections, "__wrapped_by_modular_robots__", None) or _sqp.projections
 _projections.__wrapped_by_modular_robots__ = _scipy_projections
 _sqp.projections = _projections
+
+_ScipyCanonical = getattr(_trust_constr.CanonicalConstraint, "__wraps_scipy__", _trust_constr.CanonicalConstraint)
+
+
+class _SolverCanonical(GatheredCanonical):
+    """Canonical constraints by gathers (:mod:`~modular_robots.ocp.canonical`) in a solver's
+    thread, SciPy's own anywhere else."""
+
+    __wraps_scipy__ = _ScipyCanonical
+
+    @classmethod
+    def concatenate(cls, canonical_constraints, sparse_jacobian):
+        if getattr(_solver_thread, "n_variables", None) is None:
+            return _ScipyCanonical.concatenate(canonical_constraints, sparse_jacobian)
+        return super().concatenate(canonical_constraints, sparse_jacobian)
+
+
+# trust-constr builds its canonical constraints through this name of its module, once per solve.
+_trust_constr.CanonicalConstraint = _SolverCanonical
 
 
 @dataclass(frozen=True)
