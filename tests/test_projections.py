@@ -16,7 +16,7 @@ from scipy.optimize._trustregion_constr.projections import projections as scipy_
 
 from modular_robots.composition import Composition
 from modular_robots.feasibility import check_composition
-from modular_robots.ocp import solver as solver_module
+from modular_robots.ocp import trust_constr
 from modular_robots.ocp.candidate import composition_problem
 from modular_robots.ocp.projections import SLACK_THRESHOLD, BarrierKKT, barrier_projections
 from modular_robots.scenario import load_scenario
@@ -125,9 +125,9 @@ def test_a_non_finite_matrix_is_refused_so_that_scipy_reports_it():
     seen = {}
 
     def in_solver_thread():
-        solver_module._solver_thread.n_variables = ny
+        trust_constr.mark_solver_thread(ny)
         try:
-            solver_module._projections(A)
+            trust_constr.projections(A)
         except ValueError as error:
             seen["error"] = str(error)
 
@@ -161,16 +161,16 @@ def test_a_refinement_that_does_not_help_is_dropped():
 def test_trust_constr_gets_them_only_in_a_solver_thread():
     """In a solver's thread ``projections`` is the structured one where ``A`` has the structure,
     SciPy's elsewhere; outside, SciPy's for every matrix."""
-    assert equality_constrained_sqp.projections is solver_module._projections
+    assert equality_constrained_sqp.projections is trust_constr.projections
     A, ny = random_case(4)
     plain = sparse.csr_array(np.random.default_rng(4).standard_normal((5, 9)))
     x = np.random.default_rng(5).standard_normal(A.shape[1])
     seen = {}
 
     def in_solver_thread():
-        solver_module._solver_thread.n_variables = ny
-        seen["structured"] = solver_module._projections(A)[0] @ x
-        seen["plain"] = solver_module._projections(plain)[0] @ np.ones(9)
+        trust_constr.mark_solver_thread(ny)
+        seen["structured"] = trust_constr.projections(A)[0] @ x
+        seen["plain"] = trust_constr.projections(plain)[0] @ np.ones(9)
 
     thread = threading.Thread(target=in_solver_thread)
     thread.start()
@@ -178,4 +178,4 @@ def test_trust_constr_gets_them_only_in_a_solver_thread():
     reference = scipy_projections(A)[0] @ x
     assert np.allclose(seen["structured"], reference, rtol=0, atol=1e-10)
     assert np.allclose(seen["plain"], scipy_projections(plain)[0] @ np.ones(9), rtol=0, atol=1e-12)
-    assert getattr(solver_module._solver_thread, "n_variables", None) is None
+    assert not trust_constr.in_solver_thread()

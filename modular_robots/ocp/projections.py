@@ -25,6 +25,7 @@ checks them against SciPy's own and against a dense QR.
 
 from __future__ import annotations
 
+import threading
 import warnings
 
 import numpy as np
@@ -61,46 +62,37 @@ class BarrierKKT:
     def __init__(self, A, n_variables: int, threshold: float = SLACK_THRESHOLD):
         A = A if isinstance(A, sparse.csr_array) else sparse.csr_array(A)
         A.sort_indices()
-        m, n = A.shape
-        ny = n_variables
-        mi = n - ny
-        me = m - mi
-        if mi < 0 or me < 0:
-            raise ValueError(f"A of shape {A.shape} has no barrier structure for {ny} variables")
         if not np.all(np.isfinite(A.data)):
             raise ValueError("A has non-finite entries")  # SciPy's path raises it to the solver
-        self.A, self.shape, self.ny, self.me, self.mi = A, (m, n), ny, me, mi
-        # The slack entries, straight from the CSR arrays: one per inequality row, on the diagonal.
-        per_row = np.diff(A.indptr)
-        slack = A.indices >= ny
-        if not (
-            np.count_nonzero(slack) == mi
-            and np.array_equal(np.repeat(np.arange(m), per_row)[slack], np.arange(me, m))
-            and np.array_equal(A.indices[slack], np.arange(ny, n))
-        ):
-            raise ValueError("A's slack columns are not one diagonal block under the equality rows")
-        self.s = s = A.data[slack]
-        shift = np.concatenate([np.zeros(me + 1, dtype=A.indptr.dtype), np.arange(1, mi + 1, dtype=A.indptr.dtype)])
-        j = sparse.csr_array((A.data[~slack], A.indices[~slack], A.indptr - shift), shape=(m, ny))
-        j_in = j[me:]
+        layout = _layout(A, n_variables)
+        ny, me, mi = layout.ny, layout.me, layout.mi
+        self.A, self.shape, self.ny, self.me, self.mi = A, A.shape, ny, me, mi
+        data = A.data
+        self.s = s = data[layout.slack]
+        j_in_data = data[layout.in_take]
         large = np.abs(s) >= threshold
-        self._small = np.flatnonzero(~large)
+        self._small = small = np.flatnonzero(~large)
         #: 1/s on the eliminated rows, 0 on the others (whose rows the dense system keeps)
         self._inv_s = np.divide(1.0, s, out=np.zeros(mi), where=large)
         self._large = large.astype(float)
-        self._j_in = j_in
-        weighted = sparse.csr_array(  # S^-1 J on eliminated rows, zero rows elsewhere
-            (j_in.data * np.repeat(self._inv_s, np.diff(j_in.indptr)), j_in.indices, j_in.indptr), shape=j_in.shape
-        )
-        self._weighted_t = weighted.T
+        self._j_in = sparse.csr_array((j_in_data, layout.in_indices, layout.in_indptr), shape=(mi, ny))
+        weighted_data = j_in_data * self._inv_s[layout.in_row]  # S^-1 J on eliminated rows, zero rows elsewhere
+        self._weighted_t = sparse.csr_array((weighted_data, layout.in_indices, layout.in_indptr), shape=(mi, ny)).T
         self._a_t = A.T
-        self._s_small = s[self._small]
-        j_small = j_in[self._small].toarray()
-        j_eq = j[:me].toarray()
-        k = len(self._small)
+        self._s_small = s[small]
+        k = len(small)
         size = ny + me + k
+        rank = np.full(mi, -1)
+        rank[small] = np.arange(k)
+        in_small = rank[layout.in_row]
+        kept = in_small >= 0
+        j_small = np.zeros((k, ny))
+        j_small.flat[in_small[kept] * ny + layout.in_indices[kept]] = j_in_data[kept]
+        j_eq = np.zeros((me, ny))
+        j_eq.flat[layout.eq_flat] = data[layout.eq_take]
+        dense = np.zeros((mi, ny))
+        dense.flat[layout.in_flat] = weighted_data
         kkt = np.zeros((size, size))
-        dense = weighted.toarray()
         kkt[:ny, :ny] = dense.T @ dense  # BLAS beats a sparse product here (0.27 vs 0.40 ms)
         kkt[np.arange(ny), np.arange(ny)] += 1.0
         kkt[:ny, ny : ny + me] = j_eq.T
@@ -150,6 +142,52 @@ class BarrierKKT:
         l_in = (self._j_in @ x - t_in) * inv_s**2 + r_u * inv_s
         l_in[small] = w[ny + me :]
         return np.concatenate([x, r_u - self.s * l_in]), np.concatenate([w[ny : ny + me], l_in])
+
+
+class _Layout:
+    """Where the entries of a barrier Jacobian of one sparsity structure go: its slacks, the
+    equality rows' and the inequality rows' entries (positions in ``A.data``, and in the dense
+    ``J_eq`` and ``J_ineq``). A solve keeps one structure, so it is worked out once per solve."""
+
+    def __init__(self, A: sparse.csr_array, ny: int):
+        m, n = A.shape
+        mi = n - ny
+        me = m - mi
+        if mi < 0 or me < 0:
+            raise ValueError(f"A of shape {A.shape} has no barrier structure for {ny} variables")
+        per_row = np.diff(A.indptr)
+        row = np.repeat(np.arange(m), per_row)
+        slack = A.indices >= ny
+        if not (
+            np.count_nonzero(slack) == mi
+            and np.array_equal(row[slack], np.arange(me, m))
+            and np.array_equal(A.indices[slack], np.arange(ny, n))
+        ):
+            raise ValueError("A's slack columns are not one diagonal block under the equality rows")
+        self.indptr, self.indices = A.indptr.copy(), A.indices.copy()
+        self.ny, self.me, self.mi = ny, me, mi
+        self.slack = np.flatnonzero(slack)
+        self.eq_take = np.flatnonzero(~slack & (row < me))
+        self.eq_flat = row[self.eq_take] * ny + A.indices[self.eq_take]
+        self.in_take = np.flatnonzero(~slack & (row >= me))
+        self.in_row = row[self.in_take] - me
+        self.in_indices = A.indices[self.in_take]
+        self.in_indptr = np.concatenate([[0], np.cumsum(per_row[me:] - 1)]).astype(A.indptr.dtype)
+        self.in_flat = self.in_row * ny + self.in_indices
+
+    def fits(self, A: sparse.csr_array, ny: int) -> bool:
+        return ny == self.ny and np.array_equal(A.indptr, self.indptr) and np.array_equal(A.indices, self.indices)
+
+
+_last_layout = threading.local()
+
+
+def _layout(A: sparse.csr_array, ny: int) -> _Layout:
+    """The layout of ``A``'s structure: the thread's last one if ``A`` has it."""
+    layout = getattr(_last_layout, "layout", None)
+    if layout is None or not layout.fits(A, ny):
+        layout = _last_layout.layout = _Layout(A, ny)
+    return layout
 
 
 def barrier_projections(A, n_variables: int, max_refin: int = 3):

@@ -8,13 +8,9 @@ solver iteration, :meth:`ShootingSolver.close` stops the solver cleanly (its cal
 one of the two threads runs at any moment, so the problem's Pinocchio data is never shared.
 A solver failure never raises into the caller: the generator ends and :attr:`outcome` says why.
 
-Importing this module replaces the ``projections`` function that trust-constr's SQP step calls
-every iteration by a wrapper: in a solver's thread it computes the projections from the barrier
-subproblem's structure (:func:`~modular_robots.ocp.projections.barrier_projections`, about three
-times cheaper than factoring the whole augmented system with SuperLU); anywhere else, or for a
-matrix without that structure, it is SciPy's own function, unchanged. It likewise has
-trust-constr build its canonical constraints by gathers in a solver's thread
-(:mod:`~modular_robots.ocp.canonical`; bit-identical values, no sparse indexing per iteration).
+Its thread is marked for :mod:`~modular_robots.ocp.trust_constr`, which takes over three parts
+of trust-constr there (its projections, canonical constraints and barrier function) by cheaper
+ones computed from the problem's structure.
 """
 
 from __future__ import annotations
@@ -30,12 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
-from scipy.optimize._trustregion_constr import equality_constrained_sqp as _sqp
-from scipy.optimize._trustregion_constr import minimize_trustregion_constr as _trust_constr
 
-from .canonical import GatheredCanonical
-from .projections import barrier_projections
 from .shooting import ShootingProblem
+from .trust_constr import mark_solver_thread
 
 __all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS"]
 
@@ -59,46 +52,6 @@ WARM_BARRIER = 1e-4
 #: of the iterations but costs more per iteration, so ``sr1`` is the default
 #: (``docs/design-notes.md``, ``benchmarks/RESULTS.md``).
 HESSIANS = ("sr1", "structured")
-
-_solver_thread = threading.local()
-
-
-def _projections(A, method=None, orth_tol=1e-12, max_refin=3, tol=1e-15):
-    """SciPy's ``projections`` (null-space, least-squares and row-space operators of ``A``); in a
-    solver's thread, from the barrier subproblem's structure when ``A`` has it."""
-    n_variables = getattr(_solver_thread, "n_variables", None)
-    if n_variables is not None and method in (None, "AugmentedSystem") and sparse.issparse(A):
-        try:
-            return barrier_projections(A, n_variables, max_refin)
-        except ValueError:  # not the barrier structure, or singular: SciPy's general path
-            pass
-    return _scipy_projections(A, method, orth_tol, max_refin, tol)
-
-
-# trust-constr has no option for its projections: its SQP step calls this name of its module for
-# every iteration; the replacement changes nothing outside a solver's thread.
-_scipy_projections = getattr(_sqp.projections, "__wrapped_by_modular_robots__", None) or _sqp.projections
-_projections.__wrapped_by_modular_robots__ = _scipy_projections
-_sqp.projections = _projections
-
-_ScipyCanonical = getattr(_trust_constr.CanonicalConstraint, "__wraps_scipy__", _trust_constr.CanonicalConstraint)
-
-
-class _SolverCanonical(GatheredCanonical):
-    """Canonical constraints by gathers (:mod:`~modular_robots.ocp.canonical`) in a solver's
-    thread, SciPy's own anywhere else."""
-
-    __wraps_scipy__ = _ScipyCanonical
-
-    @classmethod
-    def concatenate(cls, canonical_constraints, sparse_jacobian):
-        if getattr(_solver_thread, "n_variables", None) is None:
-            return _ScipyCanonical.concatenate(canonical_constraints, sparse_jacobian)
-        return super().concatenate(canonical_constraints, sparse_jacobian)
-
-
-# trust-constr builds its canonical constraints through this name of its module, once per solve.
-_trust_constr.CanonicalConstraint = _SolverCanonical
 
 
 @dataclass(frozen=True)
@@ -297,7 +250,7 @@ class ShootingSolver:
     def _run(self) -> None:
         problem = self.problem
         self._clock = time.perf_counter()
-        _solver_thread.n_variables = problem.n_variables
+        mark_solver_thread(problem.n_variables)
         try:
             result = self._minimize()
         except Exception as exc:

@@ -1,0 +1,97 @@
+"""Where the project takes over parts of SciPy's ``trust-constr``, in a solver's thread only.
+
+trust-constr has no options for these, so importing this module replaces three names in its
+modules. Each replacement acts only in a thread marked by :func:`mark_solver_thread` (a
+:class:`~modular_robots.ocp.solver.ShootingSolver`'s); anywhere else it is SciPy's code,
+unchanged:
+
+- ``projections`` of its SQP step: from the barrier subproblem's structure
+  (:func:`~modular_robots.ocp.projections.barrier_projections`, about three times cheaper than
+  SuperLU on the whole augmented system; a matrix without the structure, singular or non-finite
+  goes to SciPy's);
+- its canonical constraints, by gathers (:class:`~modular_robots.ocp.canonical.GatheredCanonical`;
+  bit-identical values and Jacobians);
+- the barrier function's sum of ``log(s)``, vectorised instead of a Python loop over the slacks
+  (bit-identical).
+
+``tests/test_projections.py`` and ``tests/test_canonical.py`` check each against SciPy's own.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize._trustregion_constr import equality_constrained_sqp as _sqp
+from scipy.optimize._trustregion_constr import minimize_trustregion_constr as _minimize_module
+from scipy.optimize._trustregion_constr import tr_interior_point as _interior_point
+
+from .canonical import GatheredCanonical
+from .projections import barrier_projections
+
+__all__ = ["mark_solver_thread", "in_solver_thread"]
+
+_solver_thread = threading.local()
+
+
+def mark_solver_thread(n_variables: int) -> None:
+    """Mark the calling thread as a solver's, for a problem of ``n_variables`` variables."""
+    _solver_thread.n_variables = n_variables
+
+
+def in_solver_thread() -> bool:
+    """True in a thread marked by :func:`mark_solver_thread`."""
+    return getattr(_solver_thread, "n_variables", None) is not None
+
+
+def projections(A, method=None, orth_tol=1e-12, max_refin=3, tol=1e-15):
+    """SciPy's ``projections`` (null-space, least-squares and row-space operators of ``A``); in a
+    solver's thread, from the barrier subproblem's structure when ``A`` has it."""
+    n_variables = getattr(_solver_thread, "n_variables", None)
+    if n_variables is not None and method in (None, "AugmentedSystem") and sparse.issparse(A):
+        try:
+            return barrier_projections(A, n_variables, max_refin)
+        except ValueError:  # not the barrier structure, or singular: SciPy's general path
+            pass
+    return scipy_projections(A, method, orth_tol, max_refin, tol)
+
+
+class SolverCanonical(GatheredCanonical):
+    """Canonical constraints by gathers in a solver's thread, SciPy's own anywhere else."""
+
+    @classmethod
+    def concatenate(cls, canonical_constraints, sparse_jacobian):
+        if not in_solver_thread():
+            return ScipyCanonical.concatenate(canonical_constraints, sparse_jacobian)
+        return super().concatenate(canonical_constraints, sparse_jacobian)
+
+
+def barrier_function(self, f, c_ineq, s):
+    """trust-constr's barrier function ``f - mu * sum(log(s))`` (``-inf`` for ``s <= 0``), from
+    ``BarrierSubproblem._compute_function``, with the logarithms taken at once."""
+    if not in_solver_thread():
+        return scipy_barrier_function(self, f, c_ineq, s)
+    s[self.enforce_feasibility] = -c_ineq[self.enforce_feasibility]
+    positive = s > 0
+    log_s = np.full(s.shape, -np.inf)
+    np.log(s, out=log_s, where=positive)
+    return f - self.barrier_parameter * np.sum(log_s)
+
+
+def _original(owner, name: str):
+    """SciPy's ``owner.name``, also when this module is imported again (a reload)."""
+    found = getattr(owner, name)
+    return getattr(found, "__scipy_original__", found)
+
+
+scipy_projections = _original(_sqp, "projections")
+ScipyCanonical = _original(_minimize_module, "CanonicalConstraint")
+scipy_barrier_function = _original(_interior_point.BarrierSubproblem, "_compute_function")
+projections.__scipy_original__ = scipy_projections
+SolverCanonical.__scipy_original__ = ScipyCanonical
+barrier_function.__scipy_original__ = scipy_barrier_function
+
+_sqp.projections = projections  # called once per iteration by the SQP step
+_minimize_module.CanonicalConstraint = SolverCanonical  # built once per solve
+_interior_point.BarrierSubproblem._compute_function = barrier_function  # once per evaluated point

@@ -1,0 +1,77 @@
+"""The parts of trust-constr that :mod:`modular_robots.ocp.trust_constr` takes over: only in a
+solver's thread, and the bit-identical ones (canonical constraints, barrier function) leave a
+whole solve's iterates bit for bit as SciPy's code makes them."""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+
+import numpy as np
+import pytest
+from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
+
+from modular_robots.ocp import trust_constr
+from modular_robots.ocp.solver import ShootingSolver
+
+from .test_canonical import paper_problem
+
+
+class Subproblem:  # what BarrierSubproblem._compute_function reads of its instance
+    barrier_parameter = 1e-3
+    enforce_feasibility = np.array([False, True, False, False, False, False])
+
+
+SLACKS = {
+    "interior": np.array([1e-9, 0.5, 3.0, 1e3, 2e-4, 7.0]),
+    "at and past the bound": np.array([0.0, 0.5, -1e-12, 2.0, -3.0, 1.0]),
+    "not a number": np.array([np.nan, 0.5, 1.0, 2.0, np.inf, 1.0]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SLACKS))
+def test_the_barrier_function_is_scipys_bit_for_bit(case):
+    c_ineq = -np.linspace(0.1, 0.6, 6)
+    with np.errstate(invalid="ignore"):  # inf - inf in the "not a number" case
+        theirs = trust_constr.scipy_barrier_function(Subproblem(), 2.5, c_ineq, SLACKS[case].copy())
+    seen = {}
+
+    def in_solver_thread():
+        trust_constr.mark_solver_thread(6)
+        with np.errstate(invalid="ignore"):
+            seen["ours"] = trust_constr.barrier_function(Subproblem(), 2.5, c_ineq, SLACKS[case].copy())
+
+    thread = threading.Thread(target=in_solver_thread)
+    thread.start()
+    thread.join()
+    assert np.float64(seen["ours"]).tobytes() == np.float64(theirs).tobytes()
+
+
+def test_outside_a_solver_thread_everything_is_scipys(monkeypatch):
+    calls = []
+    monkeypatch.setattr(trust_constr, "scipy_barrier_function", lambda *args: calls.append(args) or 0.0)
+    assert not trust_constr.in_solver_thread()
+    trust_constr.barrier_function(Subproblem(), 1.0, np.zeros(6), np.ones(6))
+    assert len(calls) == 1
+    canonical = trust_constr.SolverCanonical.concatenate([CanonicalConstraint.empty(3)] * 2, True)
+    assert type(canonical) is CanonicalConstraint
+
+
+def history(problem) -> tuple[int, str]:
+    solver = ShootingSolver(problem)
+    digest = hashlib.sha1()
+    for iterate in solver.iterate():
+        digest.update(iterate.y.tobytes())
+        digest.update(np.float64(iterate.optimality).tobytes())
+    return solver.outcome.iterations, digest.hexdigest()
+
+
+def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(monkeypatch):
+    problem = paper_problem()
+    ours = history(problem)
+    monkeypatch.setattr(trust_constr._minimize_module, "CanonicalConstraint", trust_constr.ScipyCanonical)
+    monkeypatch.setattr(
+        trust_constr._interior_point.BarrierSubproblem, "_compute_function", trust_constr.scipy_barrier_function
+    )
+    assert history(problem) == ours
+    assert ours[0] > 10
