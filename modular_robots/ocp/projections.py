@@ -35,6 +35,8 @@ from scipy.sparse.linalg import LinearOperator
 
 __all__ = ["SLACK_THRESHOLD", "BarrierKKT", "barrier_projections"]
 
+_getrs = scipy.linalg.lapack.dgetrs
+
 #: Slacks at or above this value are eliminated (their weight ``1 / s^2`` is at most 1e4); smaller
 #: ones keep their multiplier as an unknown of the dense system.
 SLACK_THRESHOLD = 1e-2
@@ -137,7 +139,7 @@ class BarrierKKT:
         t_eq, t_in = t[:me], t[me:]
         g = t_in * inv_s - r_u * self._large  # S^-1 (t_in - S r_u) on eliminated rows
         rhs = np.concatenate([r_x + self._weighted_t @ g, t_eq, t_in[small] - self._s_small * r_u[small]])
-        w = scipy.linalg.lu_solve(self._lu, rhs, check_finite=False)
+        w, _ = _getrs(*self._lu, rhs)  # scipy.linalg.lu_solve's LAPACK call, without its checks
         x = w[:ny]
         l_in = (self._j_in @ x - t_in) * inv_s**2 + r_u * inv_s
         l_in[small] = w[ny + me :]
