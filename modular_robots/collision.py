@@ -197,7 +197,9 @@ class CollisionModel:
         (where their FCL shapes are centred) and, if asked, Pinocchio's world-frame joint Jacobian
         ``(K, 6, nv)`` at every configuration."""
         model, data = self.robot.model, self.robot.data
-        poses = np.empty((len(qs), len(self._frame_ids), 4, 4))
+        frame_ids = self._frame_ids
+        placements = data.oMf  # Pinocchio updates it in place
+        poses = np.empty((len(qs), len(frame_ids), 4, 4))
         jac = np.empty((len(qs), 6, self.robot.nv)) if jacobians else None
         for k, q in enumerate(qs):
             if jacobians:
@@ -206,7 +208,7 @@ class CollisionModel:
                 jac[k] = data.J
             else:
                 pin.framesForwardKinematics(model, data, q)
-            poses[k] = [data.oMf[fid].homogeneous for fid in self._frame_ids]
+            poses[k] = [placements[fid].homogeneous for fid in frame_ids]
         rot = poses[:, :, :3, :3]
         mid = poses[:, :, :3, 3] + self._mid_offsets[:, None] * rot[..., 2]
         return rot, mid, jac
