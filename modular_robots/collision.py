@@ -117,17 +117,18 @@ class CollisionModel:
         on_obstacle = np.empty(shape + (3,))
         for i in range(len(self._robot_objects)):
             for j in range(len(self._obstacle_objects)):
-                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], rot[i][:, 2])
+                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], rot[i])
         return Distances(dist, on_robot, on_obstacle)
 
-    def _pair_distance(self, i: int, j: int, mid: np.ndarray, axis: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def _pair_distance(self, i: int, j: int, mid: np.ndarray, rot: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """Signed distance and witness points of primitive ``i``, placed (its FCL object) with its
-        axis midpoint at ``mid`` along the unit ``axis``, and obstacle ``j``: FCL's while they are
-        apart, :func:`penetration` when FCL reports an overlap."""
-        d, on_robot, on_obstacle = _separation(self._robot_objects[i], self._obstacle_objects[j])
-        if d >= 0.0:
-            return d, on_robot, on_obstacle
-        return penetration(mid, axis, self._prim_lengths[i], self._prim_radii[i], self._centers[j], self._radii[j])
+        axis midpoint at ``mid`` and the rotation ``rot`` (axis: its third column), and obstacle
+        ``j``: FCL's while they are apart, :func:`penetration` when FCL reports an overlap."""
+        result = fcl.DistanceResult()
+        d = fcl.distance(self._robot_objects[i], self._obstacle_objects[j], _NEAREST_POINTS, result)
+        if d >= 0.0:  # the nearest points are NumPy arrays once FCL has filled them
+            return d, result.nearest_points[0], result.nearest_points[1]
+        return penetration(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i], self._centers[j], self._radii[j])
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
@@ -165,7 +166,7 @@ class CollisionModel:
             if placed != (k, i):
                 self._robot_objects[i].setTransform(fcl.Transform(rot[k, i], mid[k, i]))
                 placed = (k, i)
-            found.append(self._pair_distance(i, j, mid[k, i], rot[k, i][:, 2]))
+            found.append(self._pair_distance(i, j, mid[k, i], rot[k, i]))
         if found:
             d, pr, po = zip(*found)
             dist[ks, iis, js], on_robot[ks, iis, js], on_obstacle[ks, iis, js] = d, pr, po
@@ -246,7 +247,7 @@ class CollisionModel:
             if placed != (k, i):
                 self._robot_objects[i].setTransform(fcl.Transform(rot[k, i], mid[k, i]))
                 placed = (k, i)
-            if self._pair_distance(i, j, mid[k, i], rot[k, i][:, 2])[0] < clearance:
+            if self._pair_distance(i, j, mid[k, i], rot[k, i])[0] < clearance:
                 return False
         return True
 
@@ -337,13 +338,6 @@ def _obstacle_object(o: SphereObstacle) -> fcl.CollisionObject:
 
 #: FCL only reads a request, so one serves every query.
 _NEAREST_POINTS = fcl.DistanceRequest(enable_nearest_points=True)
-
-
-def _separation(a: fcl.CollisionObject, b: fcl.CollisionObject) -> tuple[float, np.ndarray, np.ndarray]:
-    """FCL's (unsigned) distance and nearest points; the distance is negative when they overlap."""
-    result = fcl.DistanceResult()
-    d = fcl.distance(a, b, _NEAREST_POINTS, result)
-    return d, np.asarray(result.nearest_points[0]), np.asarray(result.nearest_points[1])
 
 
 def penetration(

@@ -3,7 +3,9 @@
 :mod:`~modular_robots.ocp.shooting` transcribes the minimum-time (or minimum-effort) problem by
 direct multiple shooting, with the dynamics of :mod:`~modular_robots.ocp.transcription` and the
 initial guesses of :mod:`~modular_robots.ocp.guess`; :mod:`~modular_robots.ocp.solver` runs SciPy
-``trust-constr`` on it one iteration at a time; :mod:`~modular_robots.ocp.verification`
+``trust-constr`` on it one iteration at a time (with the parts that
+:mod:`~modular_robots.ocp.trust_constr` computes from the problem's structure);
+:mod:`~modular_robots.ocp.verification`
 re-integrates a solution independently; :mod:`~modular_robots.ocp.candidate` chains them into a
 generator per candidate, the unit that step D advances in lockstep. Step C takes boundary states
 (:class:`~modular_robots.ocp.candidate.CandidateSpec`), never step B's cascade.
