@@ -107,14 +107,17 @@ def test_canonical_rows_follow_scipys_order():
 
 
 def test_a_jacobian_whose_structure_changes_is_laid_out_again():
+    """Each evaluation's Jacobian has one entry more, outside the previous structure."""
     x0 = np.zeros(N)
     fun, jac = random_function(4, 5)
+    outside = np.argwhere(jac(x0).toarray() == 0)
     calls = []
 
-    def changing_jac(x):  # a structure that grows by one entry on every call
+    def changing_jac(x):
         calls.append(1)
         dense = jac(x).toarray()
-        dense[len(calls) % 5, len(calls) % N] = 7.0
+        for row, col in outside[: len(calls)]:
+            dense[row, col] = 7.0 + x[col]
         return sparse.csr_matrix(dense)
 
     constraint = PreparedConstraint(
@@ -127,9 +130,91 @@ def test_a_jacobian_whose_structure_changes_is_laid_out_again():
     theirs = CanonicalConstraint.concatenate(
         [CanonicalConstraint.from_PreparedConstraint(c) for c in (constraint, bounds)], True
     )
+    assert len(outside) >= 4
     for k in range(1, 4):
         x = np.full(N, 0.1 * k)
         assert_same(ours, theirs, x)
+
+
+def jacobian_of(kind: str):
+    """A Jacobian with its indices reversed within rows (``unsorted``), with every entry split in
+    two (``duplicates``), or ``dense``."""
+    fun, jac = random_function(6, 5)
+
+    def unsorted(x):
+        J = jac(x).tocsr()
+        for r in range(J.shape[0]):
+            lo, hi = J.indptr[r], J.indptr[r + 1]
+            J.indices[lo:hi], J.data[lo:hi] = J.indices[lo:hi][::-1].copy(), J.data[lo:hi][::-1].copy()
+        J.has_sorted_indices = False
+        return J
+
+    def duplicates(x):
+        J = jac(x).tocsr()
+        half = 0.5 * J.data
+        data = np.column_stack([half, J.data - half]).ravel()
+        return sparse.csr_matrix((data, np.repeat(J.indices, 2), 2 * J.indptr), shape=J.shape)
+
+    return fun, {"unsorted": unsorted, "duplicates": duplicates, "dense": lambda x: jac(x).toarray()}[kind]
+
+
+@pytest.mark.parametrize("case", ["unsorted", "duplicates", "dense", "no bounded row", "NaN bound"])
+def test_unusual_constraints_are_as_scipy_has_them(case):
+    """Jacobians that are not canonical CSR, a dense one, a constraint with no bounded row
+    (which SciPy never evaluates) and a NaN bound (SciPy drops that row of a one-sided
+    constraint)."""
+    x0 = np.linspace(-0.5, 0.5, N)
+    kinds = CASES["mixed"][:5]
+    fun, jac = random_function(6, 5)
+    if case in ("unsorted", "duplicates", "dense"):
+        fun, jac = jacobian_of(case)
+    lb, ub = bounds_of(["free"] * 5 if case == "no bounded row" else kinds)
+    if case == "NaN bound":
+        lb, ub = bounds_of(["less"] * 5)
+        ub[2] = np.nan
+    calls = []
+
+    def counted_jac(x):
+        calls.append(1)
+        return jac(x)
+
+    sparse_jacobian = case != "dense"
+    prepared_all = [
+        PreparedConstraint(NonlinearConstraint(fun, lb, ub, jac=counted_jac, hess=no_hessian), x0, sparse_jacobian),
+        prepared(CASES["mixed"], 1, x0) if sparse_jacobian else None,
+        PreparedConstraint(Bounds(-np.ones(N), np.ones(N)), x0, sparse_jacobian),
+    ]
+    prepared_all = [c for c in prepared_all if c is not None]
+    ours = GatheredCanonical.concatenate(
+        [GatheredCanonical.from_PreparedConstraint(c) for c in prepared_all], sparse_jacobian
+    )
+    theirs = CanonicalConstraint.concatenate(
+        [CanonicalConstraint.from_PreparedConstraint(c) for c in prepared_all], sparse_jacobian
+    )
+    assert (ours.n_eq, ours.n_ineq) == (theirs.n_eq, theirs.n_ineq)
+    calls.clear()
+    for x in (x0, x0 + 0.1):
+        if case == "dense":
+            for a, b in zip(ours.jac(x), theirs.jac(x), strict=True):
+                assert np.asarray(a).tobytes() == np.asarray(b).tobytes()
+        else:
+            assert_same(ours, theirs, x)
+    if case == "no bounded row":
+        assert calls == []
+
+
+def test_the_jacobians_handed_out_are_the_callers_to_change():
+    """trust-constr may sort or edit a Jacobian in place; the next one must not change with it."""
+    x0 = np.linspace(-0.5, 0.5, N)
+    prepared_all = [prepared(CASES["mixed"], 1, x0), prepared(CASES["all two-sided"], 2, x0)]
+    ours = GatheredCanonical.concatenate([GatheredCanonical.from_PreparedConstraint(c) for c in prepared_all], True)
+    theirs = CanonicalConstraint.concatenate(
+        [CanonicalConstraint.from_PreparedConstraint(c) for c in prepared_all], True
+    )
+    for J in ours.jac(x0):
+        J.indices[:] = 0
+        J.indptr[:] = 0
+    assert_same(ours, theirs, x0 + 0.1)
 
 
 def paper_problem():

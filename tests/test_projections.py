@@ -16,6 +16,7 @@ from scipy.optimize._trustregion_constr.projections import projections as scipy_
 
 from modular_robots.composition import Composition
 from modular_robots.feasibility import check_composition
+from modular_robots.ocp import projections as projections_module
 from modular_robots.ocp import trust_constr
 from modular_robots.ocp.candidate import composition_problem
 from modular_robots.ocp.projections import SLACK_THRESHOLD, BarrierKKT, barrier_projections
@@ -179,3 +180,47 @@ def test_trust_constr_gets_them_only_in_a_solver_thread():
     assert np.allclose(seen["structured"], reference, rtol=0, atol=1e-10)
     assert np.allclose(seen["plain"], scipy_projections(plain)[0] @ np.ones(9), rtol=0, atol=1e-12)
     assert not trust_constr.in_solver_thread()
+
+
+def split_entries(A: sparse.csr_array) -> sparse.csr_array:
+    """``A`` with every entry stored as two halves (duplicates)."""
+    half = 0.5 * A.data
+    data = np.column_stack([half, A.data - half]).ravel()
+    return sparse.csr_array((data, np.repeat(A.indices, 2), 2 * A.indptr), shape=A.shape)
+
+
+def reversed_rows(A: sparse.csr_array) -> sparse.csr_array:
+    """``A`` with the indices of every row stored in reverse order."""
+    order = np.concatenate([np.arange(A.indptr[r + 1] - 1, A.indptr[r] - 1, -1) for r in range(A.shape[0])])
+    reordered = sparse.csr_array((A.data[order], A.indices[order], A.indptr.copy()), shape=A.shape)
+    reordered.has_sorted_indices = False
+    return reordered
+
+
+@pytest.mark.parametrize("stored", [split_entries, reversed_rows])
+def test_duplicates_and_unsorted_rows_are_solved_as_the_matrix_they_sum_to(stored):
+    A, ny = random_case(6)
+    given = stored(A)
+    arrays = [given.data.copy(), given.indices.copy(), given.indptr.copy()]
+    rng = np.random.default_rng(7)
+    r, t = rng.standard_normal(A.shape[1]), rng.standard_normal(A.shape[0])
+    z, w = BarrierKKT(given, ny).solve(r, t)
+    z_ref, w_ref = BarrierKKT(A, ny).solve(r, t)
+    assert np.allclose(z, z_ref, rtol=0, atol=1e-10) and np.allclose(w, w_ref, rtol=0, atol=1e-10)
+    assert all(np.array_equal(a, b) for a, b in zip(arrays, [given.data, given.indices, given.indptr], strict=True))
+
+
+def test_one_structures_layout_serves_other_values_but_no_other_shape():
+    A, ny = random_case(7)
+    rng = np.random.default_rng(8)
+    B = A.copy()
+    B.data = B.data * rng.uniform(0.5, 2.0, B.nnz)
+    r, t = rng.standard_normal(A.shape[1]), rng.standard_normal(A.shape[0])
+    BarrierKKT(A, ny)
+    reused = BarrierKKT(B, ny).solve(r, t)
+    projections_module._last_layout.layout = None
+    fresh = BarrierKKT(B, ny).solve(r, t)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(reused, fresh, strict=True))
+    wider = sparse.csr_array((B.data, B.indices, B.indptr), shape=(B.shape[0], B.shape[1] + 1))
+    with pytest.raises(ValueError, match="slack columns are not one diagonal block"):
+        BarrierKKT(wider, ny)

@@ -9,9 +9,11 @@ import threading
 
 import numpy as np
 import pytest
+from scipy.optimize import Bounds
+from scipy.optimize._constraints import PreparedConstraint
 from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
 
-from modular_robots.ocp import trust_constr
+from modular_robots.ocp import canonical, trust_constr
 from modular_robots.ocp.solver import ShootingSolver
 
 from .test_canonical import paper_problem
@@ -31,20 +33,24 @@ SLACKS = {
 
 @pytest.mark.parametrize("case", sorted(SLACKS))
 def test_the_barrier_function_is_scipys_bit_for_bit(case):
+    """Its value, and the slacks it overwrites where feasibility is enforced."""
     c_ineq = -np.linspace(0.1, 0.6, 6)
+    their_s = SLACKS[case].copy()
     with np.errstate(invalid="ignore"):  # inf - inf in the "not a number" case
-        theirs = trust_constr.scipy_barrier_function(Subproblem(), 2.5, c_ineq, SLACKS[case].copy())
+        theirs = trust_constr.scipy_barrier_function(Subproblem(), 2.5, c_ineq, their_s)
+    our_s = SLACKS[case].copy()
     seen = {}
 
     def in_solver_thread():
         trust_constr.mark_solver_thread(6)
         with np.errstate(invalid="ignore"):
-            seen["ours"] = trust_constr.barrier_function(Subproblem(), 2.5, c_ineq, SLACKS[case].copy())
+            seen["ours"] = trust_constr.barrier_function(Subproblem(), 2.5, c_ineq, our_s)
 
     thread = threading.Thread(target=in_solver_thread)
     thread.start()
     thread.join()
     assert np.float64(seen["ours"]).tobytes() == np.float64(theirs).tobytes()
+    assert our_s.tobytes() == their_s.tobytes() and our_s[1] == -c_ineq[1]
 
 
 def test_outside_a_solver_thread_everything_is_scipys(monkeypatch):
@@ -55,6 +61,8 @@ def test_outside_a_solver_thread_everything_is_scipys(monkeypatch):
     assert len(calls) == 1
     canonical = trust_constr.SolverCanonical.concatenate([CanonicalConstraint.empty(3)] * 2, True)
     assert type(canonical) is CanonicalConstraint
+    bounds = PreparedConstraint(Bounds(-np.ones(3), np.ones(3)), np.zeros(3), sparse_jacobian=True)
+    assert type(trust_constr.SolverCanonical.from_PreparedConstraint(bounds)) is CanonicalConstraint
 
 
 def history(problem) -> tuple[int, str]:
@@ -68,7 +76,21 @@ def history(problem) -> tuple[int, str]:
 
 def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(monkeypatch):
     problem = paper_problem()
+    used = {"gathers": 0, "barrier": 0}
+    gathered_jac, barrier = canonical._Gather.jac, trust_constr.barrier_function
+
+    def counted_jac(self, x):
+        used["gathers"] += 1
+        return gathered_jac(self, x)
+
+    def counted_barrier(self, f, c_ineq, s):
+        used["barrier"] += trust_constr.in_solver_thread()
+        return barrier(self, f, c_ineq, s)
+
+    monkeypatch.setattr(canonical._Gather, "jac", counted_jac)
+    monkeypatch.setattr(trust_constr._interior_point.BarrierSubproblem, "_compute_function", counted_barrier)
     ours = history(problem)
+    assert used["gathers"] > 10 and used["barrier"] > 10  # the hooks did run
     monkeypatch.setattr(trust_constr._minimize_module, "CanonicalConstraint", trust_constr.ScipyCanonical)
     monkeypatch.setattr(
         trust_constr._interior_point.BarrierSubproblem, "_compute_function", trust_constr.scipy_barrier_function

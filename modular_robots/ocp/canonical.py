@@ -91,19 +91,21 @@ class _Gather:
         return f[self.eq_rows] - self.eq_value, ineq
 
     def jac(self, x):
+        """The canonical Jacobians, or None if a constraint's Jacobian is not CSR (SciPy's own code
+        then handles it). Unsorted indices and duplicate entries are kept, as SciPy keeps them."""
         jacobians = [cfun.jac(x) for cfun in self.functions]
         if not all(sparse.issparse(J) and J.format == "csr" for J in jacobians):
             return None
         key = [(J.indptr, J.indices) for J in jacobians]
         if self._structure is None or not _same_structure(self._structure[0], key):
             self._structure = ([(p.copy(), i.copy()) for p, i in key], self._layout(jacobians))
-        (eq_take, eq_indices, eq_indptr), (in_take, in_sign, in_indices, in_indptr) = self._structure[1]
+        (eq_take, eq_indices, eq_indptr), (in_take, in_negated, in_indices, in_indptr) = self._structure[1]
         data = np.concatenate([J.data for J in jacobians])
         ineq_data = data[in_take]
-        ineq_data *= in_sign
-        return (
-            sparse.csr_array((data[eq_take], eq_indices, eq_indptr), shape=(self.eq_rows.size, self.n)),
-            sparse.csr_array((ineq_data, in_indices, in_indptr), shape=(self.ineq_rows.size, self.n)),
+        np.negative(ineq_data, out=ineq_data, where=in_negated)  # SciPy's -J, sign bit and all
+        return (  # index arrays copied: the caller may sort or change them in place
+            sparse.csr_array((data[eq_take], eq_indices.copy(), eq_indptr.copy()), shape=(self.eq_rows.size, self.n)),
+            sparse.csr_array((ineq_data, in_indices.copy(), in_indptr.copy()), shape=(self.ineq_rows.size, self.n)),
         )
 
     def _layout(self, jacobians):
@@ -122,8 +124,8 @@ class _Gather:
 
         eq_take, eq_indices, eq_indptr = pick(self.eq_rows)
         in_take, in_indices, in_indptr = pick(self.ineq_rows)
-        in_sign = np.repeat(self.ineq_sign, np.diff(in_indptr))
-        return (eq_take, eq_indices, eq_indptr), (in_take, in_sign, in_indices, in_indptr)
+        in_negated = np.repeat(self.ineq_sign < 0, np.diff(in_indptr))
+        return (eq_take, eq_indices, eq_indptr), (in_take, in_negated, in_indices, in_indptr)
 
 
 def _same_structure(cached, key) -> bool:
@@ -132,13 +134,23 @@ def _same_structure(cached, key) -> bool:
     )
 
 
+def _gatherable(source) -> bool:
+    """False for what SciPy treats apart: a constraint with no bounded row (SciPy never evaluates
+    it) or with NaN bounds."""
+    if source is None:
+        return False
+    _, lb, ub = source
+    lb, ub = np.asarray(lb, dtype=float), np.asarray(ub, dtype=float)
+    return not (np.isnan(lb).any() or np.isnan(ub).any() or (np.all(lb == -np.inf) and np.all(ub == np.inf)))
+
+
 class GatheredCanonical(CanonicalConstraint):
     """SciPy's :class:`CanonicalConstraint` whose concatenation evaluates by gathers.
 
     Every instance made from a prepared constraint keeps its ``(fun, lb, ub)``; a concatenation
     of such instances with sparse Jacobians takes SciPy's Hessian and feasibility mask and gets
-    its values and Jacobians from :func:`canonical_rows` (a Jacobian that is not CSR goes through
-    SciPy's own code).
+    its values and Jacobians from :func:`canonical_rows`. SciPy's own code serves a Jacobian
+    that is not CSR, a constraint with no bounded row and NaN bounds.
     """
 
     @classmethod
@@ -152,7 +164,7 @@ class GatheredCanonical(CanonicalConstraint):
     def concatenate(cls, canonical_constraints, sparse_jacobian):
         canonical = super().concatenate(canonical_constraints, sparse_jacobian)
         sources = [getattr(c, "source", None) for c in canonical_constraints]
-        if not sparse_jacobian or not sources or any(s is None for s in sources):
+        if not sparse_jacobian or not sources or not all(_gatherable(s) for s in sources):
             return canonical
         gather = _Gather(sources, sources[0][0].n)
         scipy_jac = canonical.jac

@@ -63,7 +63,9 @@ class BarrierKKT:
 
     def __init__(self, A, n_variables: int, threshold: float = SLACK_THRESHOLD):
         A = A if isinstance(A, sparse.csr_array) else sparse.csr_array(A)
-        A.sort_indices()
+        if not A.has_canonical_format:  # sorted, duplicates summed; the caller's matrix untouched
+            A = A.copy()
+            A.sum_duplicates()
         if not np.all(np.isfinite(A.data)):
             raise ValueError("A has non-finite entries")  # SciPy's path raises it to the solver
         layout = _layout(A, n_variables)
@@ -167,7 +169,7 @@ class _Layout:
         ):
             raise ValueError("A's slack columns are not one diagonal block under the equality rows")
         self.indptr, self.indices = A.indptr.copy(), A.indices.copy()
-        self.ny, self.me, self.mi = ny, me, mi
+        self.shape, self.ny, self.me, self.mi = A.shape, ny, me, mi
         self.slack = np.flatnonzero(slack)
         self.eq_take = np.flatnonzero(~slack & (row < me))
         self.eq_flat = row[self.eq_take] * ny + A.indices[self.eq_take]
@@ -178,7 +180,12 @@ class _Layout:
         self.in_flat = self.in_row * ny + self.in_indices
 
     def fits(self, A: sparse.csr_array, ny: int) -> bool:
-        return ny == self.ny and np.array_equal(A.indptr, self.indptr) and np.array_equal(A.indices, self.indices)
+        return (
+            ny == self.ny
+            and A.shape == self.shape
+            and np.array_equal(A.indptr, self.indptr)
+            and np.array_equal(A.indices, self.indices)
+        )
 
 
 _last_layout = threading.local()

@@ -9,8 +9,8 @@ one of the two threads runs at any moment, so the problem's Pinocchio data is ne
 A solver failure never raises into the caller: the generator ends and :attr:`outcome` says why.
 
 Its thread is marked for :mod:`~modular_robots.ocp.trust_constr`, which takes over three parts
-of trust-constr there (its projections, canonical constraints and barrier function) by cheaper
-ones computed from the problem's structure.
+of trust-constr there by cheaper ones: its projections and canonical constraints, computed from
+the problem's structure, and its barrier function, vectorised.
 """
 
 from __future__ import annotations

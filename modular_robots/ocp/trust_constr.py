@@ -14,7 +14,8 @@ unchanged:
 - the barrier function's sum of ``log(s)``, vectorised instead of a Python loop over the slacks
   (bit-identical).
 
-``tests/test_projections.py`` and ``tests/test_canonical.py`` check each against SciPy's own.
+``tests/test_projections.py``, ``tests/test_canonical.py`` and ``tests/test_trust_constr.py``
+check each against SciPy's own.
 """
 
 from __future__ import annotations
@@ -61,6 +62,12 @@ class SolverCanonical(GatheredCanonical):
     """Canonical constraints by gathers in a solver's thread, SciPy's own anywhere else."""
 
     @classmethod
+    def from_PreparedConstraint(cls, constraint):
+        if not in_solver_thread():
+            return ScipyCanonical.from_PreparedConstraint(constraint)
+        return super().from_PreparedConstraint(constraint)
+
+    @classmethod
     def concatenate(cls, canonical_constraints, sparse_jacobian):
         if not in_solver_thread():
             return ScipyCanonical.concatenate(canonical_constraints, sparse_jacobian)
@@ -68,8 +75,9 @@ class SolverCanonical(GatheredCanonical):
 
 
 def barrier_function(self, f, c_ineq, s):
-    """trust-constr's barrier function ``f - mu * sum(log(s))`` (``-inf`` for ``s <= 0``), from
-    ``BarrierSubproblem._compute_function``, with the logarithms taken at once."""
+    """trust-constr's barrier function ``f - mu * sum(log(s))`` (the log of an ``s <= 0`` taken
+    as ``-inf``, so the function is ``+inf``), from ``BarrierSubproblem._compute_function``, with
+    the logarithms taken at once."""
     if not in_solver_thread():
         return scipy_barrier_function(self, f, c_ineq, s)
     s[self.enforce_feasibility] = -c_ineq[self.enforce_feasibility]
