@@ -110,7 +110,7 @@ class CollisionModel:
         rot, mid, _ = self._placements(np.asarray(q, dtype=float)[None], jacobians=False)
         rot, mid = rot[0], mid[0]
         for i, obj in enumerate(self._robot_objects):
-            obj.setTransform(fcl.Transform(rot[i], mid[i]))
+            _place(obj, rot[i], mid[i])
         shape = (len(self._robot_objects), len(self._obstacle_objects))
         dist = np.empty(shape)
         on_robot = np.empty(shape + (3,))
@@ -126,8 +126,9 @@ class CollisionModel:
         ``j``: FCL's while they are apart, :func:`penetration` when FCL reports an overlap."""
         result = fcl.DistanceResult()
         d = fcl.distance(self._robot_objects[i], self._obstacle_objects[j], _NEAREST_POINTS, result)
-        if d >= 0.0:  # the nearest points are NumPy arrays once FCL has filled them
-            return d, result.nearest_points[0], result.nearest_points[1]
+        if d >= 0.0:  # NumPy arrays, made anew on each read of the property
+            on_robot, on_obstacle = result.nearest_points
+            return d, on_robot, on_obstacle
         return penetration(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i], self._centers[j], self._radii[j])
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
@@ -164,7 +165,7 @@ class CollisionModel:
         found, placed = [], None
         for k, i, j in zip(ks.tolist(), iis.tolist(), js.tolist()):
             if placed != (k, i):
-                self._robot_objects[i].setTransform(fcl.Transform(rot[k, i], mid[k, i]))
+                _place(self._robot_objects[i], rot[k, i], mid[k, i])
                 placed = (k, i)
             found.append(self._pair_distance(i, j, mid[k, i], rot[k, i]))
         if found:
@@ -245,7 +246,7 @@ class CollisionModel:
         placed = None
         for k, i, j in zip(*(index.tolist() for index in np.nonzero(undecided))):
             if placed != (k, i):
-                self._robot_objects[i].setTransform(fcl.Transform(rot[k, i], mid[k, i]))
+                _place(self._robot_objects[i], rot[k, i], mid[k, i])
                 placed = (k, i)
             if self._pair_distance(i, j, mid[k, i], rot[k, i])[0] < clearance:
                 return False
@@ -334,6 +335,13 @@ def _primitive_object(p) -> fcl.CollisionObject:
 
 def _obstacle_object(o: SphereObstacle) -> fcl.CollisionObject:
     return fcl.CollisionObject(fcl.Sphere(o.radius), fcl.Transform(np.asarray(o.center, dtype=float)))
+
+
+def _place(obj: fcl.CollisionObject, rot: np.ndarray, translation: np.ndarray) -> None:
+    """Set ``obj``'s pose: the same transform as ``setTransform(fcl.Transform(rot, translation))``,
+    in half the time."""
+    obj.setRotation(rot)
+    obj.setTranslation(translation)
 
 
 #: FCL only reads a request, so one serves every query.

@@ -359,3 +359,27 @@ def test_models_sharing_fcl_objects_measure_each_its_own_robot(paper_catalog):
         for index, model in enumerate(models):
             np.testing.assert_array_equal(model.distances(qs[index][k]).distance, alone[index][k])
             np.testing.assert_array_equal(model.closest_many(qs[index][k : k + 1])[0][0], alone[index][k].min(axis=0))
+
+
+def test_placing_by_rotation_and_translation_is_fcls_own_transform():
+    """``collision._place`` sets a primitive's pose as ``setTransform(fcl.Transform(R, t))`` does:
+    the same distances and witness points, to the bit, for random poses of a capsule and a sphere."""
+    import fcl
+
+    from modular_robots.collision import _NEAREST_POINTS, _place
+
+    rng = np.random.default_rng(11)
+    obstacle = fcl.CollisionObject(fcl.Sphere(0.3), fcl.Transform(np.array([0.4, -0.2, 0.9])))
+    for shape in (fcl.Capsule(0.05, 0.4), fcl.Sphere(0.07)):
+        ours, theirs = fcl.CollisionObject(shape), fcl.CollisionObject(shape)
+        for _ in range(20):
+            rot = pin.Quaternion(*rng.normal(size=4)).normalized().matrix()
+            t = rng.uniform(-1.0, 1.0, 3)
+            _place(ours, rot, t)
+            theirs.setTransform(fcl.Transform(rot, t))
+            found = []
+            for obj in (ours, theirs):
+                result = fcl.DistanceResult()
+                found.append((fcl.distance(obj, obstacle, _NEAREST_POINTS, result), *result.nearest_points))
+            assert np.float64(found[0][0]).tobytes() == np.float64(found[1][0]).tobytes()
+            assert all(a.tobytes() == b.tobytes() for a, b in zip(found[0][1:], found[1][1:], strict=True))
