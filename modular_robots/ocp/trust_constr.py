@@ -1,7 +1,8 @@
 """Where the project takes over parts of SciPy's ``trust-constr``, in a solver's thread only.
 
 trust-constr has no options for these, so importing this module replaces three names in its
-modules. Each replacement acts only in a thread marked by :func:`mark_solver_thread` (a
+modules (:data:`INSTALLED` lists those it found; a SciPy laid out otherwise keeps its own
+code). Each replacement acts only in a thread marked by :func:`mark_solver_thread` (a
 :class:`~modular_robots.ocp.solver.ShootingSolver`'s); anywhere else it is SciPy's code,
 unchanged:
 
@@ -20,18 +21,27 @@ check each against SciPy's own.
 
 from __future__ import annotations
 
+import logging
 import threading
 
 import numpy as np
 from scipy import sparse
-from scipy.optimize._trustregion_constr import equality_constrained_sqp as _sqp
-from scipy.optimize._trustregion_constr import minimize_trustregion_constr as _minimize_module
-from scipy.optimize._trustregion_constr import tr_interior_point as _interior_point
 
-from .canonical import GatheredCanonical
 from .projections import barrier_projections
 
-__all__ = ["mark_solver_thread", "in_solver_thread"]
+try:  # SciPy's private modules: a SciPy that lays trust-constr out otherwise keeps its own code
+    from scipy.optimize._trustregion_constr import equality_constrained_sqp as _sqp
+    from scipy.optimize._trustregion_constr import minimize_trustregion_constr as _minimize_module
+    from scipy.optimize._trustregion_constr import tr_interior_point as _interior_point
+
+    from .canonical import GatheredCanonical
+except ImportError:  # pragma: no cover (the SciPy the tests run on has them)
+    _sqp = _minimize_module = _interior_point = None
+    GatheredCanonical = object
+
+__all__ = ["INSTALLED", "mark_solver_thread", "in_solver_thread"]
+
+logger = logging.getLogger(__name__)
 
 _solver_thread = threading.local()
 
@@ -88,18 +98,31 @@ def barrier_function(self, f, c_ineq, s):
 
 
 def _original(owner, name: str):
-    """SciPy's ``owner.name``, also when this module is imported again (a reload)."""
-    found = getattr(owner, name)
+    """SciPy's ``owner.name`` (None if it has none), also after this module is imported again."""
+    found = getattr(owner, name, None)
     return getattr(found, "__scipy_original__", found)
 
 
 scipy_projections = _original(_sqp, "projections")
 ScipyCanonical = _original(_minimize_module, "CanonicalConstraint")
-scipy_barrier_function = _original(_interior_point.BarrierSubproblem, "_compute_function")
-projections.__scipy_original__ = scipy_projections
-SolverCanonical.__scipy_original__ = ScipyCanonical
-barrier_function.__scipy_original__ = scipy_barrier_function
+scipy_barrier_function = _original(getattr(_interior_point, "BarrierSubproblem", None), "_compute_function")
 
-_sqp.projections = projections  # called once per iteration by the SQP step
-_minimize_module.CanonicalConstraint = SolverCanonical  # built once per solve
-_interior_point.BarrierSubproblem._compute_function = barrier_function  # once per evaluated point
+#: The replacements in place, by name; each needs SciPy's original to exist.
+INSTALLED: tuple[str, ...] = ()
+for _label, _owner, _name, _replacement, _original_found in (
+    ("projections", _sqp, "projections", projections, scipy_projections),  # once per iteration
+    ("canonical constraints", _minimize_module, "CanonicalConstraint", SolverCanonical, ScipyCanonical),  # per solve
+    (
+        "barrier function",
+        getattr(_interior_point, "BarrierSubproblem", None),
+        "_compute_function",
+        barrier_function,
+        scipy_barrier_function,
+    ),  # once per evaluated point
+):
+    if _original_found is None:
+        logger.debug("trust-constr has no %s here; SciPy's own code is used", _label)
+        continue
+    _replacement.__scipy_original__ = _original_found
+    setattr(_owner, _name, _replacement)
+    INSTALLED += (_label,)
