@@ -224,3 +224,17 @@ def test_one_structures_layout_serves_other_values_but_no_other_shape():
     wider = sparse.csr_array((B.data, B.indices, B.indptr), shape=(B.shape[0], B.shape[1] + 1))
     with pytest.raises(ValueError, match="slack columns are not one diagonal block"):
         BarrierKKT(wider, ny)
+
+
+@pytest.mark.parametrize("layout", ["csr", "csc"])
+def test_the_products_skip_only_scipys_checks(layout):
+    """The solves' sparse products call SciPy's kernel directly: the product ``M @ x`` is, bit
+    for bit, on a barrier Jacobian and its transpose, on a strided vector too."""
+    A, _ = random_case(9)
+    matrix = A if layout == "csr" else A.T
+    product = projections_module._MatVec(matrix)
+    assert product.kernel is not None  # this SciPy has the kernel: the fast path is the one tested
+    rng = np.random.default_rng(10)
+    wide = rng.standard_normal(2 * matrix.shape[1])
+    for x in (wide[: matrix.shape[1]], wide[::2]):
+        assert product(x).tobytes() == (matrix @ x).tobytes()
