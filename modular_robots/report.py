@@ -199,7 +199,8 @@ def write_pruning_plot(folder: Path, results: Sequence[CandidateResult], winner:
 
 def _figure(**kwargs):
     """A figure that is not registered with pyplot: no backend is chosen or switched, so the
-    package leaves a user's plotting set-up alone."""
+    package leaves a user's plotting set-up alone. Its margins are set by hand: ``tight_layout``
+    measured every label by rendering the figure once more, 0.2 s a figure."""
     from matplotlib.figure import Figure
 
     return Figure(**kwargs)
@@ -229,7 +230,7 @@ def plot_joints(trajectory: Trajectory, path: Path, title: str = "") -> None:
     axes[0].legend(ncol=min(trajectory.nv, 6), fontsize=8, loc="best")
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}  (tf = {trajectory.t[-1]:.3f} s; limits dashed, planned bounds dotted)")
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.05, top=0.95, hspace=0.12)
     _save(fig, path)
 
 
@@ -266,7 +267,7 @@ def plot_pruning_history(results: Sequence[CandidateResult], winner: str | None,
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(title)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.1, top=0.93)
     _save(fig, path)
 
 
