@@ -6,8 +6,10 @@ them, trust-constr with the structured Hessian (``ShootingSolver(hessian="struct
 
 IPOPT's time is the solver's alone; its set-up (symbolics, derivative graphs) is reported apart.
 trust-constr's and IPOPT's solves are timed :data:`REPEATS` times each from the same start (the
-iterates are the same every time) and the median kept (the structured Hessian's solve once):
-one timing of a 0.1-0.4 s solve moved the median ratio by about 10 % between back-to-back runs.
+iterates are the same every time), in turn (trust-constr, IPOPT, trust-constr, ...), and each
+candidate's ratio is the median of the pairs' ratios: a machine whose speed drifts by tens of
+per cent within a minute (seen on a shared 2-core machine) moves both solves of a pair alike.
+Each solver's time is its median (the structured Hessian's solve is timed once).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from modular_robots.ocp.verification import verify
 
 from ._common import RESULTS, table, write
 from .bench_ocp import SCENARIO, benchmark_set
-from .casadi_peer import solve_with_ipopt
+from .casadi_peer import PeerSolver, solve_with_ipopt
 
 #: Timings per solver and candidate; the median is reported.
 REPEATS = 3
@@ -50,16 +52,19 @@ def compare(scenario, verdict) -> dict:
     problem = composition_problem(
         composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
     )
-    times = []
+    peer_solver = PeerSolver(problem)
+    times, peer_times = [], []
     for _ in range(REPEATS):
         start = time.perf_counter()
         ours = ShootingSolver(problem).solve()
         times.append(time.perf_counter() - start)
-    ours_s = float(np.median(times))
+        peer, seconds = peer_solver.solve()
+        peer_times.append(seconds)
+    ours_s, peer_s = float(np.median(times)), float(np.median(peer_times))
+    ratio = float(np.median([a / b for a, b in zip(times, peer_times)]))
     start = time.perf_counter()
     structured = ShootingSolver(problem, hessian="structured").solve()
     structured_s = time.perf_counter() - start
-    peer = solve_with_ipopt(problem, repeats=REPEATS)
     ours_v = _verification(problem, ours.final.y) if ours.final is not None else {"passed": False}
     peer_v = _verification(problem, peer.y)
     return {
@@ -68,10 +73,11 @@ def compare(scenario, verdict) -> dict:
         "variables": problem.n_variables,
         "constraints": problem.n_constraints,
         "trust_constr_s": ours_s,
-        "ipopt_s": peer.solve_seconds,
+        "ipopt_s": peer_s,
         "ipopt_setup_s": peer.setup_seconds,
-        "ratio": ours_s / peer.solve_seconds,
-        "ratio_with_setup": ours_s / (peer.solve_seconds + peer.setup_seconds),
+        "ratio": ratio,
+        "ratio_spread": [min(a / b for a, b in zip(times, peer_times)), max(a / b for a, b in zip(times, peer_times))],
+        "ratio_with_setup": ours_s / (peer_s + peer.setup_seconds),
         "trust_constr_iterations": ours.iterations,
         "ipopt_iterations": peer.iterations,
         "trust_constr_status": ours.status,

@@ -15,7 +15,7 @@ each joint's frame, ``liMi = placement * joint motion``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -23,7 +23,7 @@ import numpy as np
 from modular_robots.ocp.shooting import ShootingProblem
 from modular_robots.robot import RobotModel
 
-__all__ = ["SymbolicRobot", "PeerNLP", "PeerSolution", "solve_with_ipopt"]
+__all__ = ["SymbolicRobot", "PeerNLP", "PeerSolution", "PeerSolver", "solve_with_ipopt"]
 
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
@@ -221,55 +221,69 @@ class PeerSolution:
     cost: float
 
 
-def solve_with_ipopt(problem: ShootingProblem, y0: np.ndarray | None = None, repeats: int = 1) -> PeerSolution:
-    """Solve ``problem``'s NLP with IPOPT: exact Hessian, MUMPS, the problem's tolerances,
-    ``acceptable_iter = 0`` (no early "acceptable" stop) and the adaptive barrier strategy.
-    The solve is timed ``repeats`` times from the same start (one set-up); ``solve_seconds`` is
-    the median."""
-    settings = problem.settings
-    nlp = PeerNLP.build(problem)
-    start = time.perf_counter()
-    solver = ca.nlpsol(
-        "peer",
-        "ipopt",
-        {"x": nlp.y, "f": nlp.cost, "g": nlp.constraints},
-        {
-            "ipopt": {
-                "tol": settings.tolerance,
-                "constr_viol_tol": settings.constraint_tolerance,
-                "acceptable_iter": 0,
-                "max_iter": settings.max_iterations,
-                "mu_strategy": "adaptive",
-                "linear_solver": "mumps",
-                "hessian_approximation": "exact",
-                "print_level": 0,
-                "sb": "yes",
-            },
-            "print_time": False,
-        },
-    )
-    setup = nlp.build_seconds + time.perf_counter() - start
-    x0 = problem.initial_guess() if y0 is None else y0
-    times = []
-    for _ in range(repeats):
+class PeerSolver:
+    """IPOPT on ``problem``'s NLP, set up once (exact Hessian, MUMPS, the problem's tolerances,
+    ``acceptable_iter = 0``: no early "acceptable" stop, and the adaptive barrier strategy);
+    :meth:`solve` may then be called and timed any number of times. ``setup_seconds`` is the
+    symbolics', derivatives' and IPOPT's set-up time."""
+
+    def __init__(self, problem: ShootingProblem):
+        settings = problem.settings
+        self.problem = problem
+        nlp = PeerNLP.build(problem)
         start = time.perf_counter()
-        out = solver(
+        self._solver = ca.nlpsol(
+            "peer",
+            "ipopt",
+            {"x": nlp.y, "f": nlp.cost, "g": nlp.constraints},
+            {
+                "ipopt": {
+                    "tol": settings.tolerance,
+                    "constr_viol_tol": settings.constraint_tolerance,
+                    "acceptable_iter": 0,
+                    "max_iter": settings.max_iterations,
+                    "mu_strategy": "adaptive",
+                    "linear_solver": "mumps",
+                    "hessian_approximation": "exact",
+                    "print_level": 0,
+                    "sb": "yes",
+                },
+                "print_time": False,
+            },
+        )
+        self.setup_seconds = nlp.build_seconds + time.perf_counter() - start
+
+    def solve(self, y0: np.ndarray | None = None) -> tuple[PeerSolution, float]:
+        """One solve from ``y0`` (default: the problem's initial guess) and its wall seconds."""
+        problem = self.problem
+        x0 = problem.initial_guess() if y0 is None else y0
+        start = time.perf_counter()
+        out = self._solver(
             x0=x0,
             lbx=problem.variable_lower,
             ubx=problem.variable_upper,
             lbg=problem.constraint_lower,
             ubg=problem.constraint_upper,
         )
-        times.append(time.perf_counter() - start)
-    seconds = float(np.median(times))
-    stats = solver.stats()
-    y = np.array(out["x"]).ravel()
-    return PeerSolution(
-        status=str(stats["return_status"]),
-        success=bool(stats["success"]),
-        iterations=int(stats["iter_count"]),
-        solve_seconds=seconds,
-        setup_seconds=setup,
-        y=y,
-        cost=float(y[0] * problem.variable_scale[0]),
-    )
+        seconds = time.perf_counter() - start
+        stats = self._solver.stats()
+        y = np.array(out["x"]).ravel()
+        solution = PeerSolution(
+            status=str(stats["return_status"]),
+            success=bool(stats["success"]),
+            iterations=int(stats["iter_count"]),
+            solve_seconds=seconds,
+            setup_seconds=self.setup_seconds,
+            y=y,
+            cost=float(y[0] * problem.variable_scale[0]),
+        )
+        return solution, seconds
+
+
+def solve_with_ipopt(problem: ShootingProblem, y0: np.ndarray | None = None, repeats: int = 1) -> PeerSolution:
+    """Solve ``problem``'s NLP with IPOPT (:class:`PeerSolver`), timed ``repeats`` times from the
+    same start (one set-up); ``solve_seconds`` is the median."""
+    peer = PeerSolver(problem)
+    runs = [peer.solve(y0) for _ in range(repeats)]
+    solution = runs[-1][0]
+    return replace(solution, solve_seconds=float(np.median([seconds for _, seconds in runs])))

@@ -24,6 +24,11 @@ def _measured(doc: dict) -> str:
     return f"Measured on commit `{commit}`." if commit else ""
 
 
+def _spread(row) -> str:
+    low, high = row.get("ratio_spread", (None, None))
+    return "-" if low is None else f"{low:.2f}-{high:.2f}"
+
+
 def _fmt(value, digits=3) -> str:
     if value is None:
         return "—"
@@ -108,9 +113,11 @@ def _ipopt_lines() -> list[str]:
         "MUMPS, tolerances 1e-6, `acceptable_iter = 0`, adaptive barrier) on the same variables, scaling "
         "and constraint rows (`benchmarks/casadi_peer.py`; equality to the project's rows is tested); "
         "both optima re-integrated by the project's verification. IPOPT's set-up (symbolics, derivative "
-        "graphs) is apart from its solve time.",
+        "graphs) is apart from its solve time. The two solvers are timed in turn, "
+        f"{s.get('repeats', 3)} pairs per candidate; a candidate's ratio is the median of its pairs' ratios "
+        "(the spread column: the smallest and largest pair).",
         "",
-        f"Median trust-constr / IPOPT solve time **{s['median_ratio']:.1f}x** "
+        f"Median trust-constr / IPOPT solve time **{s['median_ratio']:.2f}x** "
         f"({s['median_ratio_with_setup']:.2f}x with IPOPT's set-up); median "
         f"{s['median_trust_constr_s']:.2f} s vs {s['median_ipopt_s']:.3f} s; iterations ratio "
         f"{s['median_iterations_ratio']:.1f}x; verified: trust-constr {s['trust_constr_verified']} of "
@@ -124,8 +131,9 @@ def _ipopt_lines() -> list[str]:
         )
     lines += [
         "",
-        "| composition | trust-constr s | IPOPT s (+ set-up) | ratio | iterations | tf s | verified | IPOPT's miss |",
-        "|---|---|---|---|---|---|---|---|",
+        "| composition | trust-constr s | IPOPT s (+ set-up) | ratio | spread | iterations | tf s | verified "
+        "| IPOPT's miss |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in peer["rows"]:
         v = r["ipopt_verification"]
@@ -138,7 +146,7 @@ def _ipopt_lines() -> list[str]:
             miss.append(f"tool {v['terminal_error_mm']:.1f} mm off")
         lines.append(
             f"| {r['composition']} | {r['trust_constr_s']:.2f} | {r['ipopt_s']:.3f} (+{r['ipopt_setup_s']:.2f}) | "
-            f"{r['ratio']:.1f}x | {r['trust_constr_iterations']} / {r['ipopt_iterations']} | "
+            f"{r['ratio']:.2f}x | {_spread(r)} | {r['trust_constr_iterations']} / {r['ipopt_iterations']} | "
             f"{_fmt(r['trust_constr_tf_s'], 4)} / {_fmt(r['ipopt_tf_s'], 4)} | "
             f"{r['trust_constr_verified']} / {r['ipopt_verified']} | {'; '.join(miss) or '-'} |"
         )
