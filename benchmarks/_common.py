@@ -27,7 +27,8 @@ def machine() -> dict:
 
 
 def commit() -> str:
-    """The short hash of the code measured, ``+`` if the work tree differs from it."""
+    """The short hash of the code measured, ``+`` if the package or the benchmarks in the work tree
+    differ from it."""
     root = Path(__file__).resolve().parents[1]
 
     def git(*args: str) -> str:
@@ -35,7 +36,8 @@ def commit() -> str:
         return done.stdout.strip() if done.returncode == 0 else ""
 
     head = git("rev-parse", "--short", "HEAD")
-    return head + ("+" if head and git("status", "--porcelain", "--", "modular_robots") else "") or "unknown"
+    dirty = head and git("status", "--porcelain", "--", "modular_robots", "benchmarks/*.py")
+    return head + ("+" if dirty else "") or "unknown"
 
 
 def best_of(repeats: int, work: Callable[[], object]) -> float:

@@ -25,7 +25,7 @@ def _measured(doc: dict) -> str:
 
 
 def _spread(row) -> str:
-    low, high = row.get("ratio_spread", (None, None))
+    low, high = row.get("ratio_spread") or (None, None)
     return "-" if low is None else f"{low:.2f}-{high:.2f}"
 
 
@@ -113,9 +113,14 @@ def _ipopt_lines() -> list[str]:
         "MUMPS, tolerances 1e-6, `acceptable_iter = 0`, adaptive barrier) on the same variables, scaling "
         "and constraint rows (`benchmarks/casadi_peer.py`; equality to the project's rows is tested); "
         "both optima re-integrated by the project's verification. IPOPT's set-up (symbolics, derivative "
-        "graphs) is apart from its solve time. The two solvers are timed in turn, "
-        f"{s.get('repeats', 3)} pairs per candidate; a candidate's ratio is the median of its pairs' ratios "
-        "(the spread column: the smallest and largest pair).",
+        "graphs) is apart from its solve time."
+        + (
+            f" The two solvers are timed in {s.get('repeats', 3)} pairs per candidate, in alternating order; "
+            "a candidate's ratio is the median of its pairs' ratios (the spread column: the smallest and "
+            "largest pair)."
+            if peer["rows"] and peer["rows"][0].get("ratio_spread")
+            else ""
+        ),
         "",
         f"Median trust-constr / IPOPT solve time **{s['median_ratio']:.2f}x** "
         f"({s['median_ratio_with_setup']:.2f}x with IPOPT's set-up); median "

@@ -230,7 +230,7 @@ def plot_joints(trajectory: Trajectory, path: Path, title: str = "") -> None:
     axes[0].legend(ncol=min(trajectory.nv, 6), fontsize=8, loc="best")
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{title}  (tf = {trajectory.t[-1]:.3f} s; limits dashed, planned bounds dotted)")
-    fig.subplots_adjust(left=0.1, right=0.97, bottom=0.05, top=0.95, hspace=0.12)
+    fig.subplots_adjust(left=0.12, right=0.97, bottom=0.05, top=0.95, hspace=0.12)
     _save(fig, path)
 
 
@@ -267,7 +267,7 @@ def plot_pruning_history(results: Sequence[CandidateResult], winner: str | None,
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(title)
-    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.1, top=0.93)
+    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.1, top=0.93)
     _save(fig, path)
 
 

@@ -238,3 +238,5 @@ def test_the_products_skip_only_scipys_checks(layout):
     wide = rng.standard_normal(2 * matrix.shape[1])
     for x in (wide[: matrix.shape[1]], wide[::2]):
         assert product(x).tobytes() == (matrix @ x).tobytes()
+    with pytest.raises(ValueError, match="dimension mismatch"):  # SciPy's own check, not a read past the end
+        product(wide)

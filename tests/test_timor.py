@@ -36,10 +36,10 @@ def assert_same_catalogue(text: str, committed: str) -> None:
             assert isinstance(b, list) and len(a) == len(b), f"{where}: {a} != {b}"
             for i, (x, y) in enumerate(zip(a, b)):
                 same(x, y, f"{where}[{i}]")
-        elif isinstance(a, float) or isinstance(b, float):
+        elif isinstance(a, float) and isinstance(b, float):
             assert b == pytest.approx(a, rel=1e-9, abs=1e-12), f"{where}: {a} != {b}"
         else:
-            assert a == b, f"{where}: {a!r} != {b!r}"
+            assert type(a) is type(b) and a == b, f"{where}: {a!r} != {b!r}"
 
     assert text.splitlines()[0] == committed.splitlines()[0]
     same(yaml.safe_load(text), yaml.safe_load(committed), "catalogue")

@@ -51,12 +51,13 @@ class _MatVec:
 
     def __init__(self, matrix):
         self.matrix = matrix
-        self.kernel = getattr(_sparsetools, f"{matrix.format}_matvec", None)
+        fast = _sparsetools is not None and matrix.format in ("csr", "csc") and matrix.dtype == np.float64
+        self.kernel = getattr(_sparsetools, f"{matrix.format}_matvec", None) if fast else None
         self.rows, self.columns = matrix.shape
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        if self.kernel is None or x.dtype != np.float64 or self.matrix.dtype != np.float64:
-            return self.matrix @ x
+        if self.kernel is None or x.dtype != np.float64 or x.shape != (self.columns,):
+            return self.matrix @ x  # SciPy's product, with its checks
         m = self.matrix
         out = np.zeros(self.rows)
         self.kernel(self.rows, self.columns, m.indptr, m.indices, m.data, np.ascontiguousarray(x), out)

@@ -33,11 +33,12 @@ try:  # SciPy's private modules: a SciPy that lays trust-constr out otherwise ke
     from scipy.optimize._trustregion_constr import equality_constrained_sqp as _sqp
     from scipy.optimize._trustregion_constr import minimize_trustregion_constr as _minimize_module
     from scipy.optimize._trustregion_constr import tr_interior_point as _interior_point
-
-    from .canonical import GatheredCanonical
 except ImportError:  # pragma: no cover (the SciPy the tests run on has them)
     _sqp = _minimize_module = _interior_point = None
-    GatheredCanonical = object
+try:  # builds on SciPy's CanonicalConstraint (a private module too): without it, only this hook goes
+    from .canonical import GatheredCanonical
+except ImportError:  # pragma: no cover
+    _minimize_module, GatheredCanonical = None, object
 
 __all__ = ["INSTALLED", "mark_solver_thread", "in_solver_thread"]
 
@@ -121,7 +122,7 @@ for _label, _owner, _name, _replacement, _original_found in (
     ),  # once per evaluated point
 ):
     if _original_found is None:
-        logger.debug("trust-constr has no %s here; SciPy's own code is used", _label)
+        logger.warning("trust-constr has no %s here; SciPy's own, slower code is used", _label)
         continue
     _replacement.__scipy_original__ = _original_found
     setattr(_owner, _name, _replacement)
