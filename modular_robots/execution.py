@@ -482,11 +482,9 @@ def _worker(parent, conn, factory, context, specs, names) -> None:
 
 
 class ProcessExecutor:
-    """Worker processes that host the jobs and advance them on command. A job is placed on the
-    worker that holds the fewest live jobs when it is first advanced (ties: the lowest worker),
-    so the lockstep's rounds stay balanced as candidates are admitted, pruned and finished; the
-    lockstep, and every decision taken on it, does not depend on the number of workers or on
-    where a job runs."""
+    """Worker processes that each host a fixed share of the jobs (round robin) and advance them on
+    command, so the lockstep, and every decision taken on it, does not depend on the number of
+    workers."""
 
     def __init__(
         self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any], names: Sequence[str], jobs: int
@@ -494,16 +492,15 @@ class ProcessExecutor:
         self._names = list(names)
         jobs = max(1, min(jobs, len(self._names)))
         ctx = multiprocessing.get_context()
-        self._owner: dict[str, int] = {}
-        self._live = [0] * jobs  # jobs placed on each worker and not yet ended
-        self._alive: set[str] = set()
+        self._owner = {name: i % jobs for i, name in enumerate(self._names)}
         self._conns, self._procs = [], []
         self._awaiting: set[int] = set()
-        for _ in range(jobs):  # every worker can build every job (the specs are small)
+        for w in range(jobs):
+            mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
             parent, child = ctx.Pipe()
             proc = ctx.Process(
                 target=_worker,
-                args=(os.getpid(), child, factory, context, list(specs), self._names),
+                args=(os.getpid(), child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
                 daemon=True,
             )
             with _signals_held():
@@ -512,32 +509,14 @@ class ProcessExecutor:
             self._conns.append(parent)
             self._procs.append(proc)
 
-    def _place(self, name: str) -> int:
-        owner = self._owner.get(name)
-        if owner is None:
-            owner = self._owner[name] = min(range(len(self._live)), key=self._live.__getitem__)
-            self._live[owner] += 1
-            self._alive.add(name)
-        return owner
-
-    def _ended(self, name: str) -> None:
-        if name in self._alive:
-            self._alive.discard(name)
-            self._live[self._owner[name]] -= 1
-
     def names(self) -> list[str]:
         return list(self._names)
 
     def _command(self, command: str, names, tolerate_dead: bool = False) -> dict:
         by_worker: dict[int, list[str]] = {}
-        out = {}
         for name in names:
-            if command == "advance":
-                by_worker.setdefault(self._place(name), []).append(name)
-            elif name in self._owner:
-                by_worker.setdefault(self._owner[name], []).append(name)
-            else:  # never started: nothing to stop, as a worker would answer
-                out[name] = None
+            by_worker.setdefault(self._owner[name], []).append(name)
+        out = {}
         for w, mine in by_worker.items():
             try:
                 if w in self._awaiting:  # a reply left unread by an interruption
@@ -563,17 +542,10 @@ class ProcessExecutor:
         return out
 
     def advance(self, names):
-        out = self._command("advance", names)
-        for name, reply in out.items():
-            if reply is not None and reply[0]:  # (done, result): the job ended
-                self._ended(name)
-        return out
+        return self._command("advance", names)
 
     def stop(self, names):
-        out = self._command("stop", names, tolerate_dead=True)
-        for name in names:
-            self._ended(name)
-        return out
+        return self._command("stop", names, tolerate_dead=True)
 
     def shutdown(self) -> None:
         for conn in self._conns:

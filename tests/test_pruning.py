@@ -870,24 +870,6 @@ def test_a_dead_worker_does_not_leave_the_others_running():
                 proc.join(timeout=5)
 
 
-def test_a_job_starts_on_the_worker_with_the_fewest_live_jobs():
-    """Jobs are placed when first advanced, on the least loaded worker, so that a candidate
-    admitted late does not queue behind its worker's others while the other worker idles; what
-    each job yields is the same wherever it runs."""
-    scripts = [Script("a", (1.0,)), Script("b", (2.0,) * 3), Script("c", (3.0,) * 3), Script("d", (4.0,) * 3)]
-    executor = ProcessExecutor(fake_factory, None, scripts, [s.name for s in scripts], 2)
-    try:
-        first = executor.advance(["a", "b"])
-        assert executor._owner == {"a": 0, "b": 1} and first["a"][1].cost == 1.0
-        assert executor.advance(["a", "b"])["a"][0]  # a ends: worker 0 holds no live job
-        executor.advance(["b", "c", "d"])  # c to the idle worker 0, then d to the tie's lowest
-        assert executor._owner == {"a": 0, "b": 1, "c": 0, "d": 0} and executor._live == [2, 1]
-        assert executor.stop(["b", "c", "d", "never"])["never"] is None
-        assert executor._live == [0, 0]
-    finally:
-        executor.shutdown()
-
-
 # --------------------------------------------------------------------------------------------
 # 3-5. The real small scenario
 # --------------------------------------------------------------------------------------------
