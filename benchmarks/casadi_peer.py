@@ -253,8 +253,8 @@ class PeerSolver:
         )
         self.setup_seconds = nlp.build_seconds + time.perf_counter() - start
 
-    def solve(self, y0: np.ndarray | None = None) -> tuple[PeerSolution, float]:
-        """One solve from ``y0`` (default: the problem's initial guess) and its wall seconds."""
+    def solve(self, y0: np.ndarray | None = None) -> PeerSolution:
+        """One solve from ``y0`` (default: the problem's initial guess), timed (``solve_seconds``)."""
         problem = self.problem
         x0 = problem.initial_guess() if y0 is None else y0
         start = time.perf_counter()
@@ -268,7 +268,7 @@ class PeerSolver:
         seconds = time.perf_counter() - start
         stats = self._solver.stats()
         y = np.array(out["x"]).ravel()
-        solution = PeerSolution(
+        return PeerSolution(
             status=str(stats["return_status"]),
             success=bool(stats["success"]),
             iterations=int(stats["iter_count"]),
@@ -277,7 +277,6 @@ class PeerSolver:
             y=y,
             cost=float(y[0] * problem.variable_scale[0]),
         )
-        return solution, seconds
 
 
 def solve_with_ipopt(problem: ShootingProblem, y0: np.ndarray | None = None, repeats: int = 1) -> PeerSolution:
@@ -285,5 +284,4 @@ def solve_with_ipopt(problem: ShootingProblem, y0: np.ndarray | None = None, rep
     same start (one set-up); ``solve_seconds`` is the median."""
     peer = PeerSolver(problem)
     runs = [peer.solve(y0) for _ in range(repeats)]
-    solution = runs[-1][0]
-    return replace(solution, solve_seconds=float(np.median([seconds for _, seconds in runs])))
+    return replace(runs[-1], solve_seconds=float(np.median([run.solve_seconds for run in runs])))
