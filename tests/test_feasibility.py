@@ -75,15 +75,28 @@ def test_arm_too_short(paper_catalog):
     assert verdict.figures["reach_margin"] == pytest.approx(-0.1)
 
 
-# -- inverse kinematics ----------------------------------------------------------------------
+# -- workspace and inverse kinematics --------------------------------------------------------
 def test_target_outside_joint_limits(paper_catalog):
     """B-J2-L2-E2 moves its tool along z from 1.2 m (strokes at 0) to 1.5 m: 1.1 m is within
-    reach but below the prismatic lower limits."""
+    reach but below the prismatic lower limits, which the workspace box sees without IK."""
     verdict = _check(paper_catalog, "B-J2-L2-E2", _task((0.0, 0.0, 1.1)))
-    assert verdict.failed_test == "inverse kinematics"
-    assert verdict.message == "inverse kinematics: no solution within joint limits at the start (closest 0.1 m)"
+    assert verdict.failed_test == "workspace"
+    assert verdict.message == (
+        "workspace: the start is 0.1 m outside the box that holds every tool position within the joint "
+        "limits (x [0, 0], y [0, 0], z [1.2, 1.5] m)"
+    )
+    assert verdict.figures["workspace_excess"] == pytest.approx(0.1, abs=1e-12)
     passed = _check(paper_catalog, "B-J2-L2-E2", _task((0.0, 0.0, 1.42)))
     assert passed.passed and sum(passed.q_start) == pytest.approx(0.22, abs=1e-4)
+
+
+def test_target_inside_the_box_out_of_reach(paper_catalog):
+    """B-J1-L1-E1 carries its tool on a circle of radius 0.95 m at 0.25 m: the circle's centre
+    is inside its box and within reach of the base, and IK finds it 0.95 m away."""
+    verdict = _check(paper_catalog, "B-J1-L1-E1", _task((0.0, 0.0, 0.25)))
+    assert verdict.failed_test == "inverse kinematics"
+    assert verdict.message == "inverse kinematics: no solution within joint limits at the start (closest 0.95 m)"
+    assert verdict.figures["workspace_excess"] <= 1e-12
 
 
 def test_ik_solutions_hold_the_target_within_limits(paper_catalog):
@@ -195,7 +208,7 @@ def test_no_feasible_composition_gives_a_diagnosis(paper_catalog):
     summary = FeasibilitySummary()
     for name in ("B-J1-L3-J1-L2-J1-L3-J1-L3-E1", "B-J1-L2-J1-L1-J1-L3-J1-L1-E1", "B-J1-L2-E1"):
         summary.add(check_composition(Composition.from_name(name, paper_catalog), paper_catalog, heavy))
-    assert summary.removed == {"reach": 1, "inverse kinematics": 0, "static torque": 2, "collision": 0}
+    assert summary.removed == {"reach": 1, "workspace": 0, "inverse kinematics": 0, "static torque": 2, "collision": 0}
     lines = summary.diagnosis().splitlines()
     assert lines[0] == "no composition is feasible: the last 2 candidate(s) were removed by the static torque test"
     assert lines[1].startswith("best torque ratio found: ") and float(lines[1].split()[4]) > 1.0
@@ -265,7 +278,7 @@ def test_filter_cli_on_a_small_catalogue(tmp_path):
 
 def test_cascade_order_is_rank_order():
     assert [t.rank for t in TESTS] == list(range(len(TESTS)))
-    assert [t.name for t in TESTS] == ["reach", "inverse kinematics", "static torque", "collision"]
+    assert [t.name for t in TESTS] == ["reach", "workspace", "inverse kinematics", "static torque", "collision"]
 
 
 def test_a_clear_pair_is_kept_when_the_fastest_pair_sweeps_through_an_obstacle(paper_catalog):
