@@ -7,6 +7,7 @@ nothing of the package before that is in place (the package itself loads lazily)
 
 from __future__ import annotations
 
+import gc
 import sys
 
 __all__ = ["main"]
@@ -19,6 +20,10 @@ def main() -> None:
     except KeyboardInterrupt:
         sys.stderr.write("Error: interrupted by the user\n")
         sys.exit(130)
+    # What the imports made lives as long as the process: the garbage collector need not walk it
+    # again, in this process or in the forked workers (where walking it would also copy the
+    # pages it touches), nor at exit (0.4 s of a run).
+    gc.freeze()
     command()
 
 
