@@ -1,7 +1,11 @@
 """Step A: every composition once, counts in closed form, grammar as data."""
 
 import itertools
+import os
+import pickle
 import re
+import subprocess
+import sys
 from collections import Counter
 
 import pytest
@@ -119,3 +123,22 @@ def test_grammar_violations_say_what(paper_catalog, name, message):
 def test_dof_out_of_range(paper_catalog):
     with pytest.raises(CompositionError, match=r"^--dof 6: the catalogue 'paper' allows 2 to 5 DOF$"):
         count_compositions(paper_catalog, dof=6)
+
+
+def test_catalogue_hash_is_its_fields_hash_in_every_process(paper_catalog):
+    """The catalogue caches its hash; a copy sent to a worker started afresh (strings hash
+    differently there) must hash as a catalogue loaded in that worker does."""
+    assert hash(paper_catalog) == hash((paper_catalog.name, paper_catalog.modules, paper_catalog.grammar))
+    code = (
+        "import pickle, sys; from modular_robots import load_catalog; "
+        "sent = pickle.loads(sys.stdin.buffer.read()); fresh = load_catalog(sys.argv[1]); "
+        "print(hash(sent) == hash(fresh), sent == fresh)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(PAPER_CATALOG)],
+        input=pickle.dumps(paper_catalog),
+        capture_output=True,
+        env={**os.environ, "PYTHONHASHSEED": "12345"},
+        check=True,
+    )
+    assert out.stdout.split() == [b"True", b"True"]
