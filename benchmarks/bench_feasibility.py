@@ -45,13 +45,14 @@ def main() -> None:
             }
         )
         tested -= serial.removed[test]
+    built = serial.checked - serial.removed["reach"] - serial.removed["workspace"]  # the paper's box needs no model
     rows.append(
         {
             "stage": "model building",
-            "compositions_tested": serial.checked - serial.removed["reach"],
+            "compositions_tested": built,
             "removed": 0,
             "cpu_seconds": serial.seconds["model"],
-            "compositions_per_second": (serial.checked - serial.removed["reach"]) / serial.seconds["model"],
+            "compositions_per_second": built / serial.seconds["model"],
         }
     )
     for label, summary, wall, _jobs in (

@@ -496,8 +496,8 @@ def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
 
 
 #: CPU seconds of step B per composition on the paper's catalogue (``benchmarks/bench_feasibility.py``
-#: measures about 2.2 ms), for the estimate given before long work.
-SECONDS_PER_COMPOSITION = 2.5e-3
+#: measures 1.2-1.7 ms on the 2.4 GHz development machine), for the estimate given before long work.
+SECONDS_PER_COMPOSITION = 1.5e-3
 #: Step A spaces larger than this are refused unless a larger ``max_compositions`` is given.
 MAX_COMPOSITIONS = 1_000_000
 

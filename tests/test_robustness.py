@@ -420,7 +420,7 @@ def test_a_space_too_large_for_step_b_is_refused_with_its_count_and_an_estimate(
     assert result.exit_code == 1 and not (tmp_path / "out").exists()
     assert result.output.splitlines()[-1] == (
         "Error: the catalogue 'paper-4dof' allows 870,712,932 compositions (2 to 12 DOF); step B would take about "
-        "25.2 days on 1 core(s). Narrow its grammar (grammar.dof) or raise the limit of 1,000,000 (--max-compositions)"
+        "15.1 days on 1 core(s). Narrow its grammar (grammar.dof) or raise the limit of 1,000,000 (--max-compositions)"
     )
 
 
