@@ -48,6 +48,9 @@ class WorkspaceBox:
         return math.sqrt(sum(d * d for d in outside))
 
 
+_UNBOUNDED = WorkspaceBox((-math.inf,) * 3, (math.inf,) * 3)
+
+
 def workspace_box(robot: RobotModel) -> WorkspaceBox:
     """The :class:`WorkspaceBox` of ``robot``'s tool frame, from its Pinocchio model (any
     catalogue, or a URDF of elsewhere)."""
@@ -59,11 +62,13 @@ def workspace_box(robot: RobotModel) -> WorkspaceBox:
     while joint > 0:
         motion = _motion(model, joint)
         if motion is None:
-            return WorkspaceBox((-math.inf,) * 3, (math.inf,) * 3)
+            return _UNBOUNDED
         lower, upper = _moved(lower, upper, *motion)
         placement = model.jointPlacements[joint]
         lower, upper = _placed(lower, upper, placement.rotation.tolist(), placement.translation.tolist())
         joint = model.parents[joint]
+    if not all(map(math.isfinite, lower + upper)):  # a stroke without limits
+        return _UNBOUNDED
     return WorkspaceBox(tuple(lower), tuple(upper))
 
 
@@ -124,7 +129,7 @@ def _moved(lower, upper, kind: str, axis, stroke) -> tuple[list[float], list[flo
     along the axis the positions keep their span; across it they stay within the largest
     distance of a corner from the axis (the distance is convex, so a corner is farthest)."""
     if kind == "prismatic":
-        ends = [(stroke[0] * a, stroke[1] * a) for a in axis]
+        ends = [(stroke[0] * a, stroke[1] * a) if a else (0.0, 0.0) for a in axis]
         return [low + min(e) for low, e in zip(lower, ends)], [high + max(e) for high, e in zip(upper, ends)]
     if axis in _AXES.values():  # about x, y or z: that span stays, the others become +-radius
         k = axis.index(1.0)

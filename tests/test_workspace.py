@@ -114,6 +114,10 @@ def test_unaligned_axes_and_unbounded_joints():
     assert box.lower == (-math.inf,) * 3 and box.upper == (math.inf,) * 3
     assert box.excess((10.0, 10.0, 10.0)) == 0.0
 
+    rail.upperPositionLimit[0] = math.inf  # a stroke without a limit: unbounded, never NaN
+    box = workspace_box(RobotModel(rail, "tool0", (), "rail"))
+    assert box.lower == (-math.inf,) * 3 and box.upper == (math.inf,) * 3
+
 
 def test_catalogue_numbers_give_the_model_box(paper_catalog):
     """The fast path (catalogue numbers, shared chains of last modules) against the box of the
