@@ -7,10 +7,11 @@ The cascade, in rank order (measured costs per call in ``benchmarks/results/feas
    of each piece's largest length (prismatic strokes at their extremes). A revolute joint does
    not change the distance between points on its axis and points after it, so the bound is
    exact to the triangle inequality and can never drop a reachable target.
-1. ``workspace`` — on the robot model, without IK: both targets inside a box that holds every
-   tool position within the joint limits (:mod:`modular_robots.workspace`). Also a bound that
-   never drops a reachable target; on the paper's task it removes nine in ten of the
-   compositions IK would reject, at a tenth of their IK cost.
+1. ``workspace`` — without IK: both targets within the IK tolerance of a box that holds every
+   tool position within the joint limits (:mod:`modular_robots.workspace`), from catalogue
+   numbers before any model is built (from the robot model for general catalogues). Also a
+   bound that never drops a reachable target; on the paper's task it removes nine in ten of
+   the compositions IK would reject, at a tenth of their IK cost.
 2. ``inverse kinematics`` — position IK at the start and at the goal within joint limits, from
    several deterministic seeds (:mod:`modular_robots.ik`).
 3. ``static torque`` — gravity torque with the payload within every joint's effort limit.
@@ -338,7 +339,10 @@ def _inside_workspace(
     cascade.clock.time(WORKSPACE.name, t0)
     if excess <= settings.tolerance:
         return True
-    span = ", ".join(f"{axis} [{low:.3g}, {high:.3g}]" for axis, low, high in zip("xyz", box.lower, box.upper))
+    span = ", ".join(
+        f"{axis} [{round(low, 3) + 0.0:.3f}, {round(high, 3) + 0.0:.3f}]"  # no -0.000 or 1e-16 of rounding
+        for axis, low, high in zip("xyz", box.lower, box.upper)
+    )
     cascade.fail(
         WORKSPACE.name,
         f"workspace: the {label} is {excess:.3g} m outside the box that holds every tool position "
@@ -592,6 +596,8 @@ class FeasibilitySummary:
     best_torque_miss: str = ""
     smallest_ik_error: float = math.inf
     smallest_ik_miss: str = ""
+    smallest_workspace_excess: float = math.inf
+    smallest_workspace_miss: str = ""
     _kept: list = field(default_factory=list, init=False, repr=False)
 
     @property
@@ -622,6 +628,9 @@ class FeasibilitySummary:
         if verdict.failed_test == INVERSE_KINEMATICS.name and figure["ik_error"] < self.smallest_ik_error:
             self.smallest_ik_error = figure["ik_error"]
             self.smallest_ik_miss = f"{verdict.composition.name}: {verdict.message}"
+        if verdict.failed_test == WORKSPACE.name and figure["workspace_excess"] < self.smallest_workspace_excess:
+            self.smallest_workspace_excess = figure["workspace_excess"]
+            self.smallest_workspace_miss = f"{verdict.composition.name}: {verdict.message}"
 
     def counts(self) -> dict:
         """The step-B block of ``result.json``'s ``counts``."""
@@ -653,4 +662,9 @@ class FeasibilitySummary:
             lines.append(f"best torque ratio found: {self.best_torque_ratio:.2f} x the limit ({self.best_torque_miss})")
         if math.isfinite(self.smallest_ik_error):
             lines.append(f"smallest IK error: {self.smallest_ik_error:.3g} m ({self.smallest_ik_miss})")
+        if math.isfinite(self.smallest_workspace_excess):
+            lines.append(
+                f"smallest distance to a workspace box: {self.smallest_workspace_excess:.3g} m "
+                f"({self.smallest_workspace_miss})"
+            )
         return "\n".join(lines)

@@ -13,7 +13,8 @@ inside an axis-aligned box:
 Every step encloses the set before it, so a target outside the final box cannot be reached: its
 distance to the box (:meth:`WorkspaceBox.excess`) is a lower bound on the error of any IK
 solution. The box can be loose, and a target inside it may still be out of reach; IK decides
-those. On the paper's 5 kg task it removes 2,164 of the 2,394 compositions that IK rejects.
+those. On the paper's 5 kg task it removes 2,164 of the 2,394 compositions that IK rejected
+before the box was there.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
-from .catalog import Catalog
+from .catalog import Catalog, Module
 from .composition import Composition
 from .robot import RobotModel
 
@@ -36,7 +37,8 @@ _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 class WorkspaceBox:
     """An axis-aligned box ``[lower, upper]`` [m] in the base frame (``base_link``) that holds
     every position of the tool frame within the joint limits; unbounded (``-inf``/``inf``) for
-    a robot with a joint this module cannot bound (spherical, planar, free-flyer, helical)."""
+    a robot with a joint this module cannot bound (spherical, planar, free-flyer, helical, a
+    prismatic joint without finite limits)."""
 
     lower: tuple[float, float, float]
     upper: tuple[float, float, float]
@@ -67,8 +69,6 @@ def workspace_box(robot: RobotModel) -> WorkspaceBox:
         placement = model.jointPlacements[joint]
         lower, upper = _placed(lower, upper, placement.rotation.tolist(), placement.translation.tolist())
         joint = model.parents[joint]
-    if not all(map(math.isfinite, lower + upper)):  # a stroke without limits
-        return _UNBOUNDED
     return WorkspaceBox(tuple(lower), tuple(upper))
 
 
@@ -76,26 +76,59 @@ def catalog_workspace_box(composition: Composition, catalog: Catalog) -> Workspa
     """:func:`workspace_box` of a composition of a catalogue of modules
     ``Rx(twist_in) M(q) Tz(length) Rx(twist_out)`` (``catalog.general`` False), from the
     catalogue's numbers alone, before any model is built: step B runs it on every composition
-    that passes the reach test. Compositions share their last modules, and the box of each
-    chain of last modules is kept (``tests/test_workspace.py`` checks it against the model's)."""
-    lower, upper = _tail_box(catalog, composition.modules)
-    return WorkspaceBox(lower, upper)
+    that passes the reach test.
+
+    The rigid transforms between two joints are composed before the box is turned by them, as
+    Pinocchio folds them into one joint placement, so the box is the model's
+    (``tests/test_workspace.py`` checks it to 1e-12). Compositions share their last modules,
+    and what each chain of last modules gives is kept."""
+    base, *rest = composition.modules
+    lower, upper, rotation, offset = _through(catalog.module(base), _tail(catalog, tuple(rest)), mounted=False)
+    lower, upper = _placed(lower, upper, rotation, offset)
+    return WorkspaceBox(tuple(lower), tuple(upper))
+
+
+_Tail = tuple[tuple[float, ...], tuple[float, ...], tuple[tuple[float, ...], ...], tuple[float, ...]]
 
 
 @lru_cache(maxsize=16384)
-def _tail_box(catalog: Catalog, modules: tuple[str, ...]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """The box of the tool positions, at the end of ``modules``, in the frame where they start."""
+def _tail(catalog: Catalog, modules: tuple[str, ...]) -> _Tail:
+    """The tool positions at the end of ``modules`` as ``(lower, upper, R, t)``: ``R b + t``
+    for ``b`` in the box ``[lower, upper]``, in the frame where the first module is mounted.
+    ``R, t`` is the rigid transform from the first joint's frame on (the identity if a module
+    begins with a joint)."""
     if not modules:
-        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    lower, upper = _tail_box(catalog, modules[1:])
-    module = catalog.module(modules[0])
-    lower, upper = _placed(lower, upper, _rx(module.twist_out), (0.0, 0.0, module.length))
-    if module.joint == "revolute":
-        lower, upper = _moved(lower, upper, "revolute", _AXES["Z"], None)
-    elif module.joint == "prismatic":
-        lower, upper = _moved(lower, upper, "prismatic", _AXES["Z"], (module.limits.lower, module.limits.upper))
-    lower, upper = _placed(lower, upper, _rx(module.twist_in), (0.0, 0.0, 0.0))
-    return tuple(lower), tuple(upper)
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), _IDENTITY, (0.0, 0.0, 0.0)
+    return _through(catalog.module(modules[0]), _tail(catalog, modules[1:]), mounted=True)
+
+
+def _through(module: Module, tail: _Tail, mounted: bool) -> _Tail:
+    """``tail``, given at ``module``'s outlet, carried to where the module is mounted
+    (``mounted``) or, for the base, which the URDF places at the origin without its
+    ``twist_in``, to its own frame."""
+    lower, upper, rotation, offset = tail
+    rotation, offset = _composed(_rx(module.twist_out), (0.0, 0.0, module.length), rotation, offset)
+    if module.joint != "fixed":
+        lower, upper = _placed(lower, upper, rotation, offset)
+        if module.joint == "revolute":
+            lower, upper = _moved(lower, upper, "revolute", _AXES["Z"], None)
+        else:
+            lower, upper = _moved(lower, upper, "prismatic", _AXES["Z"], (module.limits.lower, module.limits.upper))
+        rotation, offset = _IDENTITY, (0.0, 0.0, 0.0)
+    if mounted:
+        rotation, offset = _composed(_rx(module.twist_in), (0.0, 0.0, 0.0), rotation, offset)
+    return tuple(lower), tuple(upper), rotation, offset
+
+
+_IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def _composed(rotation, offset, then_rotation, then_offset) -> tuple[tuple[tuple[float, ...], ...], tuple[float, ...]]:
+    """The rigid transform ``(R1, t1) (R2, t2)`` = ``(R1 R2, R1 t2 + t1)`` (rotations as rows)."""
+    columns = tuple(zip(*then_rotation))
+    product = tuple(tuple(sum(a * b for a, b in zip(row, column)) for column in columns) for row in rotation)
+    moved = tuple(sum(a * b for a, b in zip(row, then_offset)) + shift for row, shift in zip(rotation, offset))
+    return product, moved
 
 
 def _rx(angle: float) -> list[list[float]]:
@@ -105,7 +138,8 @@ def _rx(angle: float) -> list[list[float]]:
 
 def _motion(model, joint: int) -> tuple[str, tuple[float, float, float], tuple[float, float] | None] | None:
     """``(kind, unit axis in the joint's frame, (lower, upper) stroke [m] or None for a
-    revolute joint)`` of a one-axis joint; None for any other joint."""
+    revolute joint)`` of a one-axis joint; None for any other joint and for a stroke without
+    finite limits."""
     name = model.joints[joint].shortname().removeprefix("JointModel")
     if name in ("RevoluteUnaligned", "RevoluteUnboundedUnaligned", "PrismaticUnaligned"):
         x, y, z = model.joints[joint].extract().axis.tolist()
@@ -117,7 +151,8 @@ def _motion(model, joint: int) -> tuple[str, tuple[float, float, float], tuple[f
         return None
     if name.startswith("P"):
         index = model.idx_qs[joint]
-        return "prismatic", axis, (float(model.lowerPositionLimit[index]), float(model.upperPositionLimit[index]))
+        stroke = (float(model.lowerPositionLimit[index]), float(model.upperPositionLimit[index]))
+        return ("prismatic", axis, stroke) if all(map(math.isfinite, stroke)) else None
     return "revolute", axis, None
 
 
@@ -129,7 +164,7 @@ def _moved(lower, upper, kind: str, axis, stroke) -> tuple[list[float], list[flo
     along the axis the positions keep their span; across it they stay within the largest
     distance of a corner from the axis (the distance is convex, so a corner is farthest)."""
     if kind == "prismatic":
-        ends = [(stroke[0] * a, stroke[1] * a) if a else (0.0, 0.0) for a in axis]
+        ends = [(stroke[0] * a, stroke[1] * a) for a in axis]
         return [low + min(e) for low, e in zip(lower, ends)], [high + max(e) for high, e in zip(upper, ends)]
     if axis in _AXES.values():  # about x, y or z: that span stays, the others become +-radius
         k = axis.index(1.0)

@@ -83,7 +83,7 @@ def test_target_outside_joint_limits(paper_catalog):
     assert verdict.failed_test == "workspace"
     assert verdict.message == (
         "workspace: the start is 0.1 m outside the box that holds every tool position within the joint "
-        "limits (x [0, 0], y [0, 0], z [1.2, 1.5] m)"
+        "limits (x [0.000, 0.000], y [0.000, 0.000], z [1.200, 1.500] m)"
     )
     assert verdict.figures["workspace_excess"] == pytest.approx(0.1, abs=1e-12)
     passed = _check(paper_catalog, "B-J2-L2-E2", _task((0.0, 0.0, 1.42)))
@@ -212,6 +212,19 @@ def test_no_feasible_composition_gives_a_diagnosis(paper_catalog):
     lines = summary.diagnosis().splitlines()
     assert lines[0] == "no composition is feasible: the last 2 candidate(s) were removed by the static torque test"
     assert lines[1].startswith("best torque ratio found: ") and float(lines[1].split()[4]) > 1.0
+
+
+def test_a_diagnosis_names_the_closest_workspace_miss(paper_catalog):
+    """When the workspace test removes the last candidates, the diagnosis gives the nearest box."""
+    summary = FeasibilitySummary()
+    for name, z in (("B-J2-L2-E2", 1.1), ("B-J2-L2-E2", 0.9)):
+        summary.add(_check(paper_catalog, name, _task((0.0, 0.0, z))))
+    assert summary.diagnosis().splitlines() == [
+        "no composition is feasible: the last 2 candidate(s) were removed by the workspace test",
+        "smallest distance to a workspace box: 0.1 m (B-J2-L2-E2: workspace: the start is 0.1 m outside the box "
+        "that holds every tool position within the joint limits (x [0.000, 0.000], y [0.000, 0.000], "
+        "z [1.200, 1.500] m))",
+    ]
 
 
 # -- streaming and workers -------------------------------------------------------------------------

@@ -3,6 +3,7 @@ kinematics on generated and foreign robots), it is exact on hand-derived cases, 
 catalogue-number fast path equals the model's box, and its distance to a target bounds what IK
 can reach."""
 
+import dataclasses
 import importlib.metadata
 import itertools
 import math
@@ -62,12 +63,12 @@ def test_paper_compositions_stay_inside(paper_catalog):
     ("urdf", "tool"),
     [
         ("ur_description/urdf/ur5_robot.urdf", "tool0"),
-        ("panda_description/urdf/panda.urdf", "panda_hand"),
+        ("panda_description/urdf/panda.urdf", "panda_leftfinger"),
     ],
 )
 def test_foreign_robots_stay_inside(urdf, tool):
-    """URDFs the package did not generate: the UR5 (revolute joints about x, y and z, placements
-    rotated) and the Panda (partial joint ranges, prismatic fingers)."""
+    """URDFs the package did not generate: the UR5 (revolute joints about y and z, placements
+    rotated) and the Panda up to a finger (seven revolute joints, then a prismatic one)."""
     robot = _foreign(urdf, tool)
     box = workspace_box(robot)
     assert _inside(box, robot, 3000, 2) <= 1e-12
@@ -119,14 +120,29 @@ def test_unaligned_axes_and_unbounded_joints():
     assert box.lower == (-math.inf,) * 3 and box.upper == (math.inf,) * 3
 
 
-def test_catalogue_numbers_give_the_model_box(paper_catalog):
+@pytest.mark.parametrize("twisted", [False, True])
+def test_catalogue_numbers_give_the_model_box(paper_catalog, twisted):
     """The fast path (catalogue numbers, shared chains of last modules) against the box of the
-    Pinocchio model built from the generated URDF, on every 13th composition."""
-    for composition in itertools.islice(enumerate_compositions(paper_catalog), 0, None, 13):
-        fast = catalog_workspace_box(composition, paper_catalog)
-        model = workspace_box(robot_model(composition, paper_catalog, 0.0))
+    Pinocchio model built from the generated URDF, on every 13th composition: of the paper
+    catalogue, and of one whose every module, the base included, has other twists in and out
+    (the URDF mounts the base at the origin without its twist in)."""
+    catalog = paper_catalog
+    if twisted:
+        angles = itertools.cycle([0.3, -1.1, 0.7, 2.0, -0.4])
+        modules = tuple(
+            dataclasses.replace(m, twist_in=m.twist_in + next(angles), twist_out=m.twist_out + next(angles))
+            for m in paper_catalog.modules
+        )
+        catalog = dataclasses.replace(paper_catalog, name="twisted", modules=modules)
+        assert catalog.module("B").twist_in != 0.0
+    for composition in itertools.islice(enumerate_compositions(catalog), 0, None, 13):
+        fast = catalog_workspace_box(composition, catalog)
+        robot = robot_model(composition, catalog, 0.0)
+        model = workspace_box(robot)
         assert fast.lower == pytest.approx(model.lower, abs=1e-12), composition.name
         assert fast.upper == pytest.approx(model.upper, abs=1e-12), composition.name
+        if twisted and composition.name.count("-") == 4:
+            assert _inside(fast, robot, 40, 5) <= 1e-12, composition.name
 
 
 def test_general_catalogue_stays_inside():
