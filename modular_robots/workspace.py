@@ -124,16 +124,29 @@ _IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
 def _composed(rotation, offset, then_rotation, then_offset) -> tuple[tuple[tuple[float, ...], ...], tuple[float, ...]]:
-    """The rigid transform ``(R1, t1) (R2, t2)`` = ``(R1 R2, R1 t2 + t1)`` (rotations as rows)."""
-    columns = tuple(zip(*then_rotation))
-    product = tuple(tuple(sum(a * b for a, b in zip(row, column)) for column in columns) for row in rotation)
-    moved = tuple(sum(a * b for a, b in zip(row, then_offset)) + shift for row, shift in zip(rotation, offset))
-    return product, moved
+    """The rigid transform ``(R1, t1) (R2, t2)`` = ``(R1 R2, R1 t2 + t1)`` (rotations as rows),
+    written out: it runs for every module of every composition step B sees."""
+    (a, b, c), (d, e, f), (g, h, i) = rotation
+    (p, q, r), (s, t, u), (v, w, x) = then_rotation
+    y0, y1, y2 = then_offset
+    return (
+        (
+            (a * p + b * s + c * v, a * q + b * t + c * w, a * r + b * u + c * x),
+            (d * p + e * s + f * v, d * q + e * t + f * w, d * r + e * u + f * x),
+            (g * p + h * s + i * v, g * q + h * t + i * w, g * r + h * u + i * x),
+        ),
+        (
+            a * y0 + b * y1 + c * y2 + offset[0],
+            d * y0 + e * y1 + f * y2 + offset[1],
+            g * y0 + h * y1 + i * y2 + offset[2],
+        ),
+    )
 
 
-def _rx(angle: float) -> list[list[float]]:
+@lru_cache(maxsize=256)
+def _rx(angle: float) -> tuple[tuple[float, float, float], ...]:
     c, s = math.cos(angle), math.sin(angle)
-    return [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]
+    return ((1.0, 0.0, 0.0), (0.0, c, -s), (0.0, s, c))
 
 
 def _motion(model, joint: int) -> tuple[str, tuple[float, float, float], tuple[float, float] | None] | None:
