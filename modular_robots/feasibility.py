@@ -113,8 +113,9 @@ class Verdict:
     ``failed_test`` is None when it passes; ``message`` says why it failed, with its figure,
     e.g. ``static torque 140 N m > 100 N m (joint 2, goal)``. ``figures`` holds the closest
     misses seen (``ik_error`` [m], ``torque_ratio``, ``clearance`` [m], ``reach_margin`` [m],
-    ``workspace_excess`` [m]). For a passing composition, ``q_start``/``q_goal`` are the chosen boundary configurations
-    and ``time_bound`` [s] their velocity-limited lower bound on motion time; ``clear_pair`` is
+    ``workspace_excess`` [m]). For a passing composition, ``q_start``/``q_goal`` are the chosen
+    boundary configurations and ``time_bound`` [s] their velocity-limited lower bound on motion
+    time; ``clear_pair`` is
     the fastest ``(q_start, q_goal)`` whose straight joint-space line keeps 0.02 m from every
     obstacle when the chosen pair's does not, else None (step C optimises from both, see
     :func:`_boundary_pair`).
@@ -295,8 +296,10 @@ class _Cascade:
 def _reach_and_model(
     cascade: _Cascade, catalog: Catalog, task: Task, settings: FeasibilitySettings, targets: dict[str, np.ndarray]
 ) -> None:
-    """The reach test, then (if it passes) the robot model, the workspace test and (if that
-    passes too) the collision model and the IK seeds of ``cascade``."""
+    """The reach test, then (if it passes) the workspace test and the robot model, and (if both
+    tests pass) the collision model and the IK seeds of ``cascade``. The workspace box comes
+    from catalogue numbers before the model is built when the catalogue allows it (most
+    compositions then need no model), else from the model."""
     t0 = time.perf_counter()
     reach = max_reach(cascade.composition, catalog)
     far_label, far = max(targets.items(), key=lambda item: float(np.linalg.norm(item[1])))
@@ -329,9 +332,7 @@ def _inside_workspace(
     cascade: _Cascade, box_of: Callable[[], WorkspaceBox], targets: dict[str, np.ndarray], settings: FeasibilitySettings
 ) -> bool:
     """The workspace test: whether both targets lie within the IK tolerance of the box
-    ``box_of()`` (one farther out is beyond any IK run's reach); records the failure otherwise.
-    From catalogue numbers before the model is built when the catalogue allows it, else from
-    the model."""
+    ``box_of()`` (one farther out is beyond any IK run's reach); records the failure otherwise."""
     t0 = time.perf_counter()
     box = box_of()
     label, excess = max(((label, box.excess(target)) for label, target in targets.items()), key=lambda x: x[1])
