@@ -115,10 +115,9 @@ class Verdict:
     misses seen (``ik_error`` [m], ``torque_ratio``, ``clearance`` [m], ``reach_margin`` [m],
     ``workspace_excess`` [m]). For a passing composition, ``q_start``/``q_goal`` are the chosen
     boundary configurations and ``time_bound`` [s] their velocity-limited lower bound on motion
-    time; ``clear_pair`` is
-    the fastest ``(q_start, q_goal)`` whose straight joint-space line keeps 0.02 m from every
-    obstacle when the chosen pair's does not, else None (step C optimises from both, see
-    :func:`_boundary_pair`).
+    time; ``clear_pair`` is the fastest ``(q_start, q_goal)`` whose straight joint-space line
+    keeps 0.02 m from every obstacle when the chosen pair's does not, else None (step C
+    optimises from both, see :func:`_boundary_pair`).
     """
 
     composition: Composition
