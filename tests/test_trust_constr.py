@@ -101,6 +101,6 @@ def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(m
 
 def test_every_replacement_is_in_place_on_this_scipy():
     """A SciPy that moved one of the replaced names would silently keep its own (slower) code."""
-    assert trust_constr.INSTALLED == ("projections", "canonical constraints", "barrier function")
+    assert trust_constr.INSTALLED == ("projections", "canonical constraints", "barrier function", "SQP loop")
     assert trust_constr._minimize_module.CanonicalConstraint is trust_constr.SolverCanonical
     assert trust_constr._interior_point.BarrierSubproblem._compute_function is trust_constr.barrier_function

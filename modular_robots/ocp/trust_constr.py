@@ -1,6 +1,6 @@
 """Where the project takes over parts of SciPy's ``trust-constr``, in a solver's thread only.
 
-trust-constr has no options for these, so importing this module replaces three names in its
+trust-constr has no options for these, so importing this module replaces four names in its
 modules (:data:`INSTALLED` lists those it found; a SciPy laid out otherwise keeps its own
 code). Each replacement acts only in a thread marked by :func:`mark_solver_thread` (a
 :class:`~modular_robots.ocp.solver.ShootingSolver`'s); anywhere else it is SciPy's code,
@@ -13,10 +13,12 @@ unchanged:
 - its canonical constraints, by gathers (:class:`~modular_robots.ocp.canonical.GatheredCanonical`;
   bit-identical values and Jacobians);
 - the barrier function's sum of ``log(s)``, vectorised instead of a Python loop over the slacks
-  (bit-identical).
+  (bit-identical);
+- its SQP loop, by :func:`~modular_robots.ocp.sqp.equality_constrained_sqp`: SciPy's, with the
+  second-order correction of a refused step repeated (IPOPT's rule) instead of tried once.
 
-``tests/test_projections.py``, ``tests/test_canonical.py`` and ``tests/test_trust_constr.py``
-check each against SciPy's own.
+``tests/test_projections.py``, ``tests/test_canonical.py``, ``tests/test_trust_constr.py`` and
+``tests/test_sqp.py`` check each against SciPy's own.
 """
 
 from __future__ import annotations
@@ -39,6 +41,10 @@ try:  # builds on SciPy's CanonicalConstraint (a private module too): without it
     from .canonical import GatheredCanonical
 except ImportError:  # pragma: no cover
     _minimize_module, GatheredCanonical = None, object
+try:  # a copy of SciPy's loop that calls into its private modules: without them, SciPy's loop stays
+    from . import sqp
+except ImportError:  # pragma: no cover
+    sqp = None
 
 __all__ = ["INSTALLED", "mark_solver_thread", "in_solver_thread"]
 
@@ -98,6 +104,14 @@ def barrier_function(self, f, c_ineq, s):
     return f - self.barrier_parameter * np.sum(log_s)
 
 
+def sqp_loop(*args, **kwargs):
+    """trust-constr's SQP loop for one barrier parameter: in a solver's thread
+    :func:`~modular_robots.ocp.sqp.equality_constrained_sqp`, SciPy's anywhere else."""
+    if in_solver_thread():
+        return sqp.equality_constrained_sqp(*args, **kwargs)
+    return scipy_sqp_loop(*args, **kwargs)
+
+
 def _original(owner, name: str):
     """SciPy's ``owner.name`` (None if it has none), also after this module is imported again."""
     found = getattr(owner, name, None)
@@ -107,6 +121,7 @@ def _original(owner, name: str):
 scipy_projections = _original(_sqp, "projections")
 ScipyCanonical = _original(_minimize_module, "CanonicalConstraint")
 scipy_barrier_function = _original(getattr(_interior_point, "BarrierSubproblem", None), "_compute_function")
+scipy_sqp_loop = _original(_interior_point, "equality_constrained_sqp") if sqp is not None else None
 
 #: The replacements in place, by name; each needs SciPy's original to exist.
 INSTALLED: tuple[str, ...] = ()
@@ -120,6 +135,7 @@ for _label, _owner, _name, _replacement, _original_found in (
         barrier_function,
         scipy_barrier_function,
     ),  # once per evaluated point
+    ("SQP loop", _interior_point, "equality_constrained_sqp", sqp_loop, scipy_sqp_loop),  # per barrier parameter
 ):
     if _original_found is None:
         logger.warning("trust-constr has no %s here; SciPy's own, slower code is used", _label)
