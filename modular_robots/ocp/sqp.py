@@ -69,7 +69,7 @@ def equality_constrained_sqp(
     """SciPy's ``equality_constrained_sqp`` (same arguments and result) with up to
     ``max_corrections`` second-order corrections per refused step."""
     projections = _scipy_sqp.projections
-    n = np.shape(x0)[0]
+    (n,) = np.shape(x0)
     if trust_lb is None:
         trust_lb = np.full(n, -np.inf)
     if trust_ub is None:
@@ -80,7 +80,17 @@ def equality_constrained_sqp(
     penalty = initial_penalty
     f, c, b, A = fun0, grad0, constr0, jac0
     S = scaling(x)
-    Z, LS, Y = projections(A, factorization_method)
+    try:
+        Z, LS, Y = projections(A, factorization_method)
+    except ValueError as e:
+        if str(e) == "expected square matrix":
+            raise ValueError(
+                "The 'expected square matrix' error can occur if there are"
+                " more equality constraints than independent variables."
+                " Consider how your constraints are set up, or use"
+                " factorization_method='SVDFactorization'."
+            ) from e
+        raise
     v = -LS.dot(c)  # least-squares Lagrange multipliers
     H = lagr_hess(x, v)
     optimality = norm(c + A.T.dot(v), np.inf)
@@ -127,7 +137,7 @@ def equality_constrained_sqp(
                     x_next, f_next, b_next = x_soc, f_soc, b_soc
                     reduction_ratio = reduction_ratio_soc
                     break
-                if not intersect or norm(b_soc) > CONTRACTION * norm(b_last):
+                if not intersect or not norm(b_soc) <= CONTRACTION * norm(b_last):  # NaN stops too
                     break
                 b_last = b_soc
 

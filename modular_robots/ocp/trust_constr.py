@@ -138,7 +138,7 @@ for _label, _owner, _name, _replacement, _original_found in (
     ("SQP loop", _interior_point, "equality_constrained_sqp", sqp_loop, scipy_sqp_loop),  # per barrier parameter
 ):
     if _original_found is None:
-        logger.warning("trust-constr has no %s here; SciPy's own, slower code is used", _label)
+        logger.warning("trust-constr has no %s here; SciPy's own code is used", _label)
         continue
     _replacement.__scipy_original__ = _original_found
     setattr(_owner, _name, _replacement)
