@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import warnings
 
 import numpy as np
 import pytest
@@ -104,3 +105,30 @@ def test_every_replacement_is_in_place_on_this_scipy():
     assert trust_constr.INSTALLED == ("projections", "canonical constraints", "barrier function", "SQP loop")
     assert trust_constr._minimize_module.CanonicalConstraint is trust_constr.SolverCanonical
     assert trust_constr._interior_point.BarrierSubproblem._compute_function is trust_constr.barrier_function
+
+
+def test_the_quasi_newton_hessian_is_scipys_sr1_and_silent_on_an_unchanged_gradient():
+    """The same matrix as SciPy's SR1 after every update; where the gradient did not change (a
+    rejected step) both keep the matrix, and only SciPy's warns."""
+    from scipy.optimize import SR1
+
+    from modular_robots.ocp.solver import _SR1
+
+    rng = np.random.default_rng(3)
+    ours, theirs = _SR1(), SR1()
+    for hessian in (ours, theirs):
+        hessian.initialize(4, "hess")
+    for _ in range(3):
+        dx, dg = rng.normal(size=4), rng.normal(size=4)
+        ours.update(dx, dg)
+        theirs.update(dx, dg)
+    np.testing.assert_array_equal(ours.get_matrix(), theirs.get_matrix())
+    before = ours.get_matrix().copy()
+    dx = rng.normal(size=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ours.update(dx, np.zeros(4))
+    with pytest.warns(UserWarning, match="delta_grad == 0.0"):
+        theirs.update(dx, np.zeros(4))
+    np.testing.assert_array_equal(ours.get_matrix(), before)
+    np.testing.assert_array_equal(theirs.get_matrix(), before)

@@ -26,7 +26,6 @@ checks them against SciPy's own and against a dense QR.
 from __future__ import annotations
 
 import threading
-import warnings
 
 import numpy as np
 import scipy.linalg
@@ -35,7 +34,7 @@ from scipy.sparse.linalg import LinearOperator
 
 __all__ = ["SLACK_THRESHOLD", "BarrierKKT", "barrier_projections"]
 
-_getrs = scipy.linalg.lapack.dgetrs
+_getrf, _getrs = scipy.linalg.lapack.dgetrf, scipy.linalg.lapack.dgetrs
 
 try:  # SciPy's compiled sparse kernels, which ``matrix @ vector`` ends in
     from scipy.sparse import _sparsetools
@@ -133,10 +132,9 @@ class BarrierKKT:
         kkt[:ny, ny + me :] = j_small.T
         kkt[ny + me :, :ny] = j_small
         kkt[np.arange(ny + me, size), np.arange(ny + me, size)] = -(self._s_small**2)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)  # singular: raised below
-            self._lu = scipy.linalg.lu_factor(kkt, overwrite_a=True, check_finite=False)
-        if not np.all(np.diagonal(self._lu[0])):
+        lu, piv, info = _getrf(kkt, overwrite_a=True)  # scipy.linalg.lu_factor's LAPACK call, without its checks
+        self._lu = (lu, piv)
+        if info != 0 or not np.all(np.diagonal(lu)):
             raise ValueError("the augmented system is singular (dependent constraint rows)")
 
     @property

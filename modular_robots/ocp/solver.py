@@ -20,7 +20,6 @@ import logging
 import queue
 import threading
 import time
-import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -358,14 +357,15 @@ class ShootingSolver:
 
 
 class _SR1(SR1):
-    """SciPy's SR1 without its "delta_grad == 0.0" note, issued whenever a step leaves a gradient
-    unchanged (as after a rejected trust-constr step). The filter is held only during an update,
-    which never yields to another solver thread: ``catch_warnings`` swaps the process's filters."""
+    """SciPy's SR1, silent when a step leaves the gradient unchanged (as after a rejected
+    trust-constr step): SciPy then keeps the matrix too, but warns "delta_grad == 0.0" each time.
+    Returning first needs no warnings filter, which would swap the process's filters under the
+    other solver threads."""
 
     def update(self, delta_x, delta_grad):
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", "delta_grad == 0.0", UserWarning)
-            super().update(delta_x, delta_grad)
+        if np.all(delta_grad == 0.0):
+            return
+        super().update(delta_x, delta_grad)
 
 
 def _rows_constraint(problem: ShootingProblem, rows: np.ndarray, hess) -> NonlinearConstraint | None:
