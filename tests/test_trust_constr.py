@@ -118,10 +118,12 @@ def test_the_quasi_newton_hessian_is_scipys_sr1_and_silent_on_an_unchanged_gradi
     ours, theirs = _SR1(), SR1()
     for hessian in (ours, theirs):
         hessian.initialize(4, "hess")
-    for _ in range(3):
-        dx, dg = rng.normal(size=4), rng.normal(size=4)
+    partly_zero, tiny = rng.normal(size=4) * [1.0, 0.0, 1.0, 0.0], np.full(4, 1e-12)
+    for dg in (rng.normal(size=4), partly_zero, tiny, rng.normal(size=4)):
+        dx = rng.normal(size=4)
         ours.update(dx, dg)
         theirs.update(dx, dg)
+        np.testing.assert_array_equal(ours.get_matrix(), theirs.get_matrix())
     np.testing.assert_array_equal(ours.get_matrix(), theirs.get_matrix())
     before = ours.get_matrix().copy()
     dx = rng.normal(size=4)

@@ -118,17 +118,18 @@ def verify(
     tf, nodes, controls = problem.unpack(y)
     N, S, nv = problem.intervals, problem.substeps, problem.nv
     hs = tf / (N * S)
-    defect, clearance = 0.0, np.inf
+    defect, clearance, pos_excess, points = 0.0, np.inf, 0.0, 0
+    vel_share, tau_share = np.zeros(nv), np.zeros(nv)
     vmax, tmax = robot.velocity_limit, robot.effort_limit
     span = np.where(
         np.isfinite(robot.upper - robot.lower) & (robot.upper > robot.lower), robot.upper - robot.lower, 1.0
     )
     planned = problem.transcription.propagate(robot, nodes[:-1], controls, tf, N, S, False).states
-    grid_states, grid_torques = [], []
     for m in range(N):
         node, u = nodes[m], controls[m]
         rhs = _dynamics(problem, node, u)
         gap = 0.0
+        grid_states, grid_torques = [], []
         for j in range(S):
             sol = solve_ivp(
                 rhs, (j * hs, (j + 1) * hs), planned[m, j], method="DOP853", rtol=rtol, atol=atol, dense_output=True
@@ -141,14 +142,15 @@ def verify(
             x = sol.y[:, -1]
             gap += np.abs(x - (planned[m, j + 1] if j < S - 1 else nodes[m + 1])) / problem.x_scale
         defect = max(defect, float(np.max(gap)))
-    states = np.concatenate(grid_states)
-    q, v = states[:, :nv], states[:, nv:]
-    points = len(states)
-    pos_excess = float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span))
-    vel_share = np.max(np.abs(v) / vmax, axis=0)
-    tau_share = np.max(np.abs(np.array(grid_torques)) / tmax, axis=0)
-    if problem.collision is not None:
-        clearance = float(problem.collision.closest_many(q)[0].min())
+        # The interval's grid at once (memory bounded by one interval's samples).
+        states = np.concatenate(grid_states)
+        q, v = states[:, :nv], states[:, nv:]
+        points += len(states)
+        pos_excess = max(pos_excess, float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span)))
+        vel_share = np.maximum(vel_share, np.max(np.abs(v) / vmax, axis=0))
+        tau_share = np.maximum(tau_share, np.max(np.abs(np.array(grid_torques)) / tmax, axis=0))
+        if problem.collision is not None:
+            clearance = min(clearance, float(problem.collision.closest_many(q)[0].min()))
     last = solve_ivp(
         _dynamics(problem, nodes[N - 1], controls[N - 1]),
         (0.0, S * hs),
