@@ -19,6 +19,7 @@ from modular_robots.feasibility import check_composition
 from modular_robots.ocp import projections as projections_module
 from modular_robots.ocp import trust_constr
 from modular_robots.ocp.candidate import composition_problem
+from modular_robots.ocp.products import MatVec, rmatvec
 from modular_robots.ocp.projections import SLACK_THRESHOLD, BarrierKKT, barrier_projections
 from modular_robots.scenario import load_scenario
 
@@ -226,17 +227,23 @@ def test_one_structures_layout_serves_other_values_but_no_other_shape():
         BarrierKKT(wider, ny)
 
 
+@pytest.mark.parametrize("transpose", [False, True], ids=["M", "M.T"])
 @pytest.mark.parametrize("layout", ["csr", "csc"])
-def test_the_products_skip_only_scipys_checks(layout):
-    """The solves' sparse products call SciPy's kernel directly: the product ``M @ x`` is, bit
-    for bit, on a barrier Jacobian and its transpose, on a strided vector too."""
+def test_the_products_skip_only_scipys_checks(layout, transpose):
+    """The solves' sparse products call SciPy's kernel directly: the product ``M @ x`` (and
+    ``M.T @ x``, without building ``M.T``) is SciPy's bit for bit, on a barrier Jacobian in either
+    format, on a strided vector too."""
     A, _ = random_case(9)
-    matrix = A if layout == "csr" else A.T
-    product = projections_module._MatVec(matrix)
-    assert product.kernel is not None  # this SciPy has the kernel: the fast path is the one tested
+    matrix = A if layout == "csr" else A.tocsc()
+    reference = matrix.T if transpose else matrix
+    product = MatVec(matrix, transpose=transpose)
+    # this SciPy has the kernel, and the vectors below fit it: the fast path is the one tested
+    assert product.kernel is not None and (product.rows, product.columns) == reference.shape
     rng = np.random.default_rng(10)
-    wide = rng.standard_normal(2 * matrix.shape[1])
-    for x in (wide[: matrix.shape[1]], wide[::2]):
-        assert product(x).tobytes() == (matrix @ x).tobytes()
+    wide = rng.standard_normal(2 * reference.shape[1])
+    for x in (wide[: reference.shape[1]], wide[::2]):
+        assert product(x).tobytes() == reference.dot(x).tobytes()
+        if transpose:
+            assert rmatvec(matrix, x).tobytes() == reference.dot(x).tobytes()
     with pytest.raises(ValueError, match="dimension mismatch"):  # SciPy's own check, not a read past the end
         product(wide)

@@ -7,14 +7,16 @@ from __future__ import annotations
 import hashlib
 import threading
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy import sparse
 from scipy.optimize import SR1, Bounds
 from scipy.optimize._constraints import PreparedConstraint
 from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
 
-from modular_robots.ocp import canonical, trust_constr
+from modular_robots.ocp import barrier, canonical, trust_constr
 from modular_robots.ocp.solver import _SR1, ShootingSolver
 
 from .test_canonical import paper_problem
@@ -77,34 +79,57 @@ def history(problem) -> tuple[int, str]:
 
 def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(monkeypatch):
     problem = paper_problem()
-    used = {"gathers": 0, "barrier": 0}
-    gathered_jac, barrier = canonical._Gather.jac, trust_constr.barrier_function
+    used = {"gathers": 0, "barrier": 0, "puts": 0, "updates": 0}
+    gathered_jac, barrier_function = canonical._Gather.jac, trust_constr.barrier_function
+    put, rmatvec = barrier.BarrierJacobian._put, trust_constr.rmatvec
 
-    def counted_jac(self, x):
-        used["gathers"] += 1
-        return gathered_jac(self, x)
+    def counted(name, function, solver_thread_only=False):
+        def call(*args):
+            used[name] += trust_constr.in_solver_thread() or not solver_thread_only
+            return function(*args)
 
-    def counted_barrier(self, f, c_ineq, s):
-        used["barrier"] += trust_constr.in_solver_thread()
-        return barrier(self, f, c_ineq, s)
+        return call
 
-    monkeypatch.setattr(canonical._Gather, "jac", counted_jac)
-    monkeypatch.setattr(trust_constr._interior_point.BarrierSubproblem, "_compute_function", counted_barrier)
-    ours = history(problem)
-    assert used["gathers"] > 10 and used["barrier"] > 10  # the hooks did run
-    monkeypatch.setattr(trust_constr._minimize_module, "CanonicalConstraint", trust_constr.ScipyCanonical)
+    monkeypatch.setattr(canonical._Gather, "jac", counted("gathers", gathered_jac))
     monkeypatch.setattr(
-        trust_constr._interior_point.BarrierSubproblem, "_compute_function", trust_constr.scipy_barrier_function
+        trust_constr._interior_point.BarrierSubproblem,
+        "_compute_function",
+        counted("barrier", barrier_function, solver_thread_only=True),
     )
+    monkeypatch.setattr(barrier.BarrierJacobian, "_put", counted("puts", put))
+    monkeypatch.setattr(trust_constr, "rmatvec", counted("updates", rmatvec))
+    ours = history(problem)
+    assert min(used.values()) > 10, used  # every hook did run
+    monkeypatch.setattr(trust_constr._minimize_module, "CanonicalConstraint", trust_constr.ScipyCanonical)
+    for owner, name, scipys in (
+        (trust_constr._interior_point.BarrierSubproblem, "_compute_function", trust_constr.scipy_barrier_function),
+        (
+            trust_constr._interior_point.BarrierSubproblem,
+            "_assemble_sparse_jacobian",
+            trust_constr.scipy_barrier_jacobian,
+        ),
+        (trust_constr._VectorFunction, "_update_hess", trust_constr.scipy_hessian_update),
+    ):
+        monkeypatch.setattr(owner, name, scipys)
     assert history(problem) == ours
     assert ours[0] > 10
 
 
 def test_every_replacement_is_in_place_on_this_scipy():
     """A SciPy that moved one of the replaced names would silently keep its own (slower) code."""
-    assert trust_constr.INSTALLED == ("projections", "canonical constraints", "barrier function", "SQP loop")
+    assert trust_constr.INSTALLED == (
+        "projections",
+        "canonical constraints",
+        "barrier function",
+        "SQP loop",
+        "barrier Jacobian",
+        "quasi-Newton update",
+    )
     assert trust_constr._minimize_module.CanonicalConstraint is trust_constr.SolverCanonical
-    assert trust_constr._interior_point.BarrierSubproblem._compute_function is trust_constr.barrier_function
+    subproblem = trust_constr._interior_point.BarrierSubproblem
+    assert subproblem._compute_function is trust_constr.barrier_function
+    assert subproblem._assemble_sparse_jacobian is trust_constr.barrier_jacobian
+    assert trust_constr._VectorFunction._update_hess is trust_constr.hessian_update
 
 
 def test_the_quasi_newton_hessian_is_scipys_sr1_and_silent_on_an_unchanged_gradient():
@@ -129,3 +154,56 @@ def test_the_quasi_newton_hessian_is_scipys_sr1_and_silent_on_an_unchanged_gradi
         theirs.update(dx, np.zeros(4))
     np.testing.assert_array_equal(ours.get_matrix(), before)
     np.testing.assert_array_equal(theirs.get_matrix(), before)
+
+
+def _jacobians(rng, n_vars=12, n_eq=4, n_ineq=9, density=0.4):
+    def random(rows):
+        return sparse.csr_array(sparse.random_array((rows, n_vars), density=density, random_state=rng))
+
+    return random(n_eq), random(n_ineq), 10.0 ** rng.uniform(-9, 2, n_ineq)
+
+
+def _scipy_assembly(n_vars, n_eq, n_ineq):
+    subproblem = SimpleNamespace(n_vars=n_vars, n_eq=n_eq, n_ineq=n_ineq)
+    return lambda J_eq, J_ineq, s: trust_constr.scipy_barrier_jacobian(subproblem, J_eq, J_ineq, s)
+
+
+def test_the_barrier_jacobian_is_scipys_bit_for_bit_by_puts_after_its_first():
+    """The first matrix of a structure is SciPy's own; the next ones, of new values, come from
+    puts and equal SciPy's in values, indices and index dtype; a new structure is learnt anew."""
+    rng = np.random.default_rng(5)
+    assemble, scipys = barrier.BarrierJacobian(), _scipy_assembly(12, 4, 9)
+    J_eq, J_ineq, s = _jacobians(rng)
+    for _ in range(2):
+        for _ in range(3):
+            J_eq.data, J_ineq.data = rng.normal(size=J_eq.nnz), rng.normal(size=J_ineq.nnz)
+            s = 10.0 ** rng.uniform(-9, 2, s.size)
+            ours = assemble(J_eq, J_ineq, s, 12, scipys)
+            assert barrier._identical(ours, scipys(J_eq, J_ineq, s))
+            assert assemble._places is not None
+        J_eq, J_ineq, _ = _jacobians(rng)  # another structure
+
+
+def test_a_structure_whose_puts_differ_from_scipys_assembly_stays_scipys():
+    """An assembly that puts each slack first in its row (a SciPy that lays the matrix out
+    otherwise) is not learnt: every matrix is that assembly's."""
+    rng = np.random.default_rng(6)
+    scipys = _scipy_assembly(12, 4, 9)
+
+    def slack_first(J_eq, J_ineq, s):
+        A = scipys(J_eq, J_ineq, s)
+        indices, data = A.indices.copy(), A.data.copy()
+        for row in range(4, 13):
+            start, end = A.indptr[row], A.indptr[row + 1]
+            indices[start:end] = np.roll(A.indices[start:end], 1)
+            data[start:end] = np.roll(A.data[start:end], 1)
+        return sparse.csr_array((data, indices, A.indptr.copy()), shape=A.shape)
+
+    assemble = barrier.BarrierJacobian()
+    J_eq, J_ineq, s = _jacobians(rng)
+    for _ in range(3):
+        J_eq.data = rng.normal(size=J_eq.nnz)
+        ours = assemble(J_eq, J_ineq, s, 12, slack_first)
+        assert barrier._identical(ours, slack_first(J_eq, J_ineq, s))
+        assert not barrier._identical(ours, scipys(J_eq, J_ineq, s))
+    assert assemble._places is None

@@ -25,6 +25,7 @@ checks them against SciPy's own and against a dense QR.
 
 from __future__ import annotations
 
+import math
 import threading
 
 import numpy as np
@@ -32,36 +33,11 @@ import scipy.linalg
 from scipy import sparse
 from scipy.sparse.linalg import LinearOperator
 
+from .products import MatVec
+
 __all__ = ["SLACK_THRESHOLD", "BarrierKKT", "barrier_projections"]
 
 _getrf, _getrs = scipy.linalg.lapack.dgetrf, scipy.linalg.lapack.dgetrs
-
-try:  # SciPy's compiled sparse kernels, which ``matrix @ vector`` ends in
-    from scipy.sparse import _sparsetools
-except ImportError:  # pragma: no cover (a SciPy that moved them: the plain product)
-    _sparsetools = None
-
-
-class _MatVec:
-    """``matrix @ x`` for a CSR or CSC ``matrix`` and a vector ``x``, by the kernel SciPy's product
-    calls, with SciPy's per-call checks and dispatch (about 20 us of a 30 us product on a barrier
-    Jacobian) left out: the same kernel on the same arrays, so the same result bit for bit. A
-    solve makes four or more such products."""
-
-    def __init__(self, matrix):
-        self.matrix = matrix
-        fast = _sparsetools is not None and matrix.format in ("csr", "csc") and matrix.dtype == np.float64
-        self.kernel = getattr(_sparsetools, f"{matrix.format}_matvec", None) if fast else None
-        self.rows, self.columns = matrix.shape
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        if self.kernel is None or x.dtype != np.float64 or x.shape != (self.columns,):
-            return self.matrix @ x  # SciPy's product, with its checks
-        m = self.matrix
-        out = np.zeros(self.rows)
-        self.kernel(self.rows, self.columns, m.indptr, m.indices, m.data, np.ascontiguousarray(x), out)
-        return out
-
 
 #: Slacks at or above this value are eliminated (their weight ``1 / s^2`` is at most 1e4); smaller
 #: ones keep their multiplier as an unknown of the dense system.
@@ -105,12 +81,12 @@ class BarrierKKT:
         #: 1/s on the eliminated rows, 0 on the others (whose rows the dense system keeps)
         self._inv_s = np.divide(1.0, s, out=np.zeros(mi), where=large)
         self._large = large.astype(float)
-        self._j_in = _MatVec(sparse.csr_array((j_in_data, layout.in_indices, layout.in_indptr), shape=(mi, ny)))
+        self._j_in = MatVec(sparse.csr_array((j_in_data, layout.in_indices, layout.in_indptr), shape=(mi, ny)))
         weighted_data = j_in_data * self._inv_s[layout.in_row]  # S^-1 J on eliminated rows, zero rows elsewhere
-        self._weighted_t = _MatVec(
-            sparse.csr_array((weighted_data, layout.in_indices, layout.in_indptr), shape=(mi, ny)).T
+        self._weighted_t = MatVec(
+            sparse.csr_array((weighted_data, layout.in_indices, layout.in_indptr), shape=(mi, ny)), transpose=True
         )
-        self._a, self._a_t = _MatVec(A), _MatVec(A.T)
+        self._a, self._a_t = MatVec(A), MatVec(A, transpose=True)
         self._s_small = s[small]
         k = len(small)
         size = ny + me + k
@@ -147,12 +123,12 @@ class BarrierKKT:
         times) until the residual is below ``rtol`` times the right-hand side's norm; a
         refinement that does not lower the residual is dropped and ends the refining."""
         z, w = self._solve_once(r, t)
-        bound = rtol * (np.linalg.norm(r) + np.linalg.norm(t))
+        bound = rtol * (_norm(r) + _norm(t))
         best, smallest = (z, w), np.inf
         for k in range(max_refin + 1):
             res_r = r - z - self._a_t(w)
             res_t = t - self._a(z)
-            size = np.linalg.norm(res_r) + np.linalg.norm(res_t)
+            size = _norm(res_r) + _norm(res_t)
             if size >= smallest:
                 break
             best, smallest = (z, w), size
@@ -173,6 +149,12 @@ class BarrierKKT:
         l_in = (self._j_in(x) - t_in) * inv_s**2 + r_u * inv_s
         l_in[small] = w[ny + me :]
         return np.concatenate([x, r_u - self.s * l_in]), np.concatenate([w[ny : ny + me], l_in])
+
+
+def _norm(x: np.ndarray) -> float:
+    """``np.linalg.norm(x)`` of a real vector, computed as it computes it (``sqrt(x . x)``),
+    without its dispatch."""
+    return math.sqrt(x.dot(x))
 
 
 class _Layout:

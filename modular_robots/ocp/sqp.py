@@ -12,7 +12,8 @@ repeated, each from the constraint values at the last corrected point, up to
 constraints' null space bends inactive torque rows by more than one correction removes, so the
 step was refused and the trust radius cut to a tenth, and a solve crawled
 (``docs/design-notes.md``). With ``max_corrections=1`` the loop is SciPy's, iterate for iterate
-(``tests/test_sqp.py``).
+(``tests/test_sqp.py``). The optimality's ``A^T v`` is taken by SciPy's kernel without building
+``A^T`` (:func:`~modular_robots.ocp.products.rmatvec`, bit for bit the same).
 
 The projections are looked up in SciPy's module at each call, so
 :mod:`~modular_robots.ocp.trust_constr`'s replacement applies here as it does in SciPy's loop.
@@ -24,6 +25,8 @@ import numpy as np
 from numpy.linalg import norm
 from scipy.optimize._trustregion_constr import equality_constrained_sqp as _scipy_sqp
 from scipy.optimize._trustregion_constr.qp_subproblem import box_intersections, modified_dogleg, projected_cg
+
+from .products import rmatvec
 
 __all__ = ["equality_constrained_sqp", "MAX_CORRECTIONS", "CONTRACTION"]
 
@@ -93,7 +96,7 @@ def equality_constrained_sqp(
         raise
     v = -LS.dot(c)  # least-squares Lagrange multipliers
     H = lagr_hess(x, v)
-    optimality = norm(c + A.T.dot(v), np.inf)
+    optimality = norm(c + rmatvec(A, v), np.inf)
     constr_violation = norm(b, np.inf) if len(b) > 0 else 0
     cg_info = {"niter": 0, "stop_cond": 0, "hits_boundary": False}
 
@@ -165,7 +168,7 @@ def equality_constrained_sqp(
             v = -LS.dot(c)
             H = lagr_hess(x, v)
             last_iteration_failed = False
-            optimality = norm(c + A.T.dot(v), np.inf)
+            optimality = norm(c + rmatvec(A, v), np.inf)
             constr_violation = norm(b, np.inf) if len(b) > 0 else 0
         else:
             penalty = previous_penalty

@@ -1,6 +1,6 @@
 """Where the project takes over parts of SciPy's ``trust-constr``, in a solver's thread only.
 
-trust-constr has no options for these, so importing this module replaces four names in its
+trust-constr has no options for these, so importing this module replaces six names in its
 modules (:data:`INSTALLED` lists those it found; a SciPy laid out otherwise keeps its own
 code). Each replacement acts only in a thread marked by :func:`mark_solver_thread` (a
 :class:`~modular_robots.ocp.solver.ShootingSolver`'s); anywhere else it is SciPy's code,
@@ -15,7 +15,11 @@ unchanged:
 - the barrier function's sum of ``log(s)``, vectorised instead of a Python loop over the slacks
   (bit-identical);
 - its SQP loop, by :func:`~modular_robots.ocp.sqp.equality_constrained_sqp`: SciPy's, with the
-  second-order correction of a refused step repeated (IPOPT's rule) instead of tried once.
+  second-order correction of a refused step repeated (IPOPT's rule) instead of tried once;
+- the barrier subproblem's Jacobian, by puts into the structure of the last one
+  (:class:`~modular_robots.ocp.barrier.BarrierJacobian`; bit-identical);
+- the quasi-Newton update's gradient change ``J^T v - J_prev^T v``, by SciPy's kernel without
+  building the transposes (:func:`~modular_robots.ocp.products.rmatvec`; bit-identical).
 
 ``tests/test_projections.py``, ``tests/test_canonical.py``, ``tests/test_trust_constr.py`` and
 ``tests/test_sqp.py`` check each against SciPy's own.
@@ -28,7 +32,10 @@ import threading
 
 import numpy as np
 from scipy import sparse
+from scipy.optimize import HessianUpdateStrategy
 
+from .barrier import BarrierJacobian
+from .products import rmatvec
 from .projections import barrier_projections
 
 try:  # SciPy's private modules: a SciPy that lays trust-constr out otherwise keeps its own code
@@ -37,6 +44,10 @@ try:  # SciPy's private modules: a SciPy that lays trust-constr out otherwise ke
     from scipy.optimize._trustregion_constr import tr_interior_point as _interior_point
 except ImportError:  # pragma: no cover (the SciPy the tests run on has them)
     _sqp = _minimize_module = _interior_point = None
+try:  # the quasi-Newton Hessian's update lives in SciPy's VectorFunction
+    from scipy.optimize._differentiable_functions import VectorFunction as _VectorFunction
+except ImportError:  # pragma: no cover
+    _VectorFunction = None
 try:  # builds on SciPy's CanonicalConstraint (a private module too): without it, only this hook goes
     from .canonical import GatheredCanonical
 except ImportError:  # pragma: no cover
@@ -112,6 +123,32 @@ def sqp_loop(*args, **kwargs):
     return scipy_sqp_loop(*args, **kwargs)
 
 
+def barrier_jacobian(self, J_eq, J_ineq, s):
+    """trust-constr's ``BarrierSubproblem._assemble_sparse_jacobian``: in a solver's thread by
+    puts into the last structure (:class:`~modular_robots.ocp.barrier.BarrierJacobian`), SciPy's
+    anywhere else."""
+    if not in_solver_thread():
+        return scipy_barrier_jacobian(self, J_eq, J_ineq, s)
+    assemble = getattr(_solver_thread, "barrier_jacobian", None)
+    if assemble is None:
+        assemble = _solver_thread.barrier_jacobian = BarrierJacobian()
+    return assemble(J_eq, J_ineq, s, self.n_vars, lambda *args: scipy_barrier_jacobian(self, *args))
+
+
+def hessian_update(self):
+    """SciPy's ``VectorFunction._update_hess``; in a solver's thread, a quasi-Newton update takes
+    the gradient change ``J^T v - J_prev^T v`` by :func:`~modular_robots.ocp.products.rmatvec`
+    (SciPy's own kernel, without building the transposes)."""
+    if self.H_updated or not in_solver_thread() or not isinstance(self._orig_hess, HessianUpdateStrategy):
+        return scipy_hessian_update(self)
+    self._update_jac()
+    if self.x_prev is not None and self.J_prev is not None:
+        delta_x = self.x - self.x_prev
+        delta_g = rmatvec(self.J, self.v) - rmatvec(self.J_prev, self.v)
+        self.H.update(delta_x, delta_g)
+    self.H_updated = True
+
+
 def _original(owner, name: str):
     """SciPy's ``owner.name`` (None if it has none), also after this module is imported again."""
     found = getattr(owner, name, None)
@@ -122,6 +159,8 @@ scipy_projections = _original(_sqp, "projections")
 ScipyCanonical = _original(_minimize_module, "CanonicalConstraint")
 scipy_barrier_function = _original(getattr(_interior_point, "BarrierSubproblem", None), "_compute_function")
 scipy_sqp_loop = _original(_interior_point, "equality_constrained_sqp") if sqp is not None else None
+scipy_barrier_jacobian = _original(getattr(_interior_point, "BarrierSubproblem", None), "_assemble_sparse_jacobian")
+scipy_hessian_update = _original(_VectorFunction, "_update_hess")
 
 #: The replacements in place, by name; each needs SciPy's original to exist.
 INSTALLED: tuple[str, ...] = ()
@@ -136,6 +175,14 @@ for _label, _owner, _name, _replacement, _original_found in (
         scipy_barrier_function,
     ),  # once per evaluated point
     ("SQP loop", _interior_point, "equality_constrained_sqp", sqp_loop, scipy_sqp_loop),  # per barrier parameter
+    (
+        "barrier Jacobian",
+        getattr(_interior_point, "BarrierSubproblem", None),
+        "_assemble_sparse_jacobian",
+        barrier_jacobian,
+        scipy_barrier_jacobian,
+    ),  # once per point whose Jacobian is asked for
+    ("quasi-Newton update", _VectorFunction, "_update_hess", hessian_update, scipy_hessian_update),  # per point
 ):
     if _original_found is None:
         logger.warning("trust-constr has no %s here; SciPy's own code is used", _label)
