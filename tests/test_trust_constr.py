@@ -60,8 +60,13 @@ def test_outside_a_solver_thread_everything_is_scipys(monkeypatch):
     calls = []
     monkeypatch.setattr(trust_constr, "scipy_barrier_function", lambda *args: calls.append(args) or 0.0)
     assert not trust_constr.in_solver_thread()
+    monkeypatch.setattr(trust_constr, "scipy_barrier_jacobian", lambda *args: calls.append(args))
+    monkeypatch.setattr(trust_constr, "scipy_hessian_update", lambda *args: calls.append(args))
     trust_constr.barrier_function(Subproblem(), 1.0, np.zeros(6), np.ones(6))
-    assert len(calls) == 1
+    J_eq, J_ineq, s = _jacobians(np.random.default_rng(1))
+    trust_constr.barrier_jacobian(SimpleNamespace(n_vars=12), J_eq, J_ineq, s)
+    trust_constr.hessian_update(SimpleNamespace(H_updated=False, _orig_hess=SR1()))
+    assert len(calls) == 3
     canonical = trust_constr.SolverCanonical.concatenate([CanonicalConstraint.empty(3)] * 2, True)
     assert type(canonical) is CanonicalConstraint
     bounds = PreparedConstraint(Bounds(-np.ones(3), np.ones(3)), np.zeros(3), sparse_jacobian=True)
@@ -168,25 +173,50 @@ def _scipy_assembly(n_vars, n_eq, n_ineq):
     return lambda J_eq, J_ineq, s: trust_constr.scipy_barrier_jacobian(subproblem, J_eq, J_ineq, s)
 
 
-def test_the_barrier_jacobian_is_scipys_bit_for_bit_by_puts_after_its_first():
+def _stored_otherwise(J, how: str):
+    """``J`` with the same rows stored otherwise: each row's entries reversed, or each entry split
+    in two duplicates, or its indices as int64."""
+    if how == "unsorted":
+        indices, data = J.indices.copy(), J.data.copy()
+        for start, end in zip(J.indptr[:-1], J.indptr[1:]):
+            indices[start:end], data[start:end] = indices[start:end][::-1], data[start:end][::-1]
+        return sparse.csr_array((data, indices, J.indptr.copy()), shape=J.shape)
+    if how == "duplicates":
+        per_row = np.diff(J.indptr)
+        indptr = np.concatenate([[0], np.cumsum(2 * per_row)])
+        return sparse.csr_array((np.repeat(0.5 * J.data, 2), np.repeat(J.indices, 2), indptr), shape=J.shape)
+    J = J.copy()
+    J.indices, J.indptr = J.indices.astype(np.int64), J.indptr.astype(np.int64)
+    return J
+
+
+@pytest.mark.parametrize("stored", ["sorted", "unsorted", "duplicates", "int64"])
+@pytest.mark.parametrize("n_eq", [4, 0])
+def test_the_barrier_jacobian_is_scipys_bit_for_bit_by_puts_after_its_first(n_eq, stored):
     """The first matrix of a structure is SciPy's own; the next ones, of new values, come from
-    puts and equal SciPy's in values, indices and index dtype; a new structure is learnt anew."""
+    puts and equal SciPy's in values, indices and index dtype; a new structure, even one with
+    the same rows' lengths (the columns moved), is learnt anew."""
     rng = np.random.default_rng(5)
-    assemble, scipys = barrier.BarrierJacobian(), _scipy_assembly(12, 4, 9)
-    J_eq, J_ineq, s = _jacobians(rng)
-    for _ in range(2):
+    assemble, scipys = barrier.BarrierJacobian(), _scipy_assembly(12, n_eq, 9)
+    first_eq, first_ineq, s = _jacobians(rng, n_eq=n_eq)
+    moved = sparse.csr_array(
+        (first_ineq.data, (first_ineq.indices + 1) % 12, first_ineq.indptr), shape=first_ineq.shape
+    )
+    store = (lambda J: _stored_otherwise(J, stored)) if stored != "sorted" else (lambda J: J)
+    for J_eq, J_ineq in ((store(first_eq), store(first_ineq)), (store(first_eq), store(moved))):
         for _ in range(3):
             J_eq.data, J_ineq.data = rng.normal(size=J_eq.nnz), rng.normal(size=J_ineq.nnz)
             s = 10.0 ** rng.uniform(-9, 2, s.size)
             ours = assemble(J_eq, J_ineq, s, 12, scipys)
             assert barrier._identical(ours, scipys(J_eq, J_ineq, s))
             assert assemble._places is not None
-        J_eq, J_ineq, _ = _jacobians(rng)  # another structure
 
 
-def test_a_structure_whose_puts_differ_from_scipys_assembly_stays_scipys():
+@pytest.mark.parametrize("first_values", ["random", "all ones"])
+def test_a_structure_whose_puts_differ_from_scipys_assembly_stays_scipys(first_values):
     """An assembly that puts each slack first in its row (a SciPy that lays the matrix out
-    otherwise) is not learnt: every matrix is that assembly's."""
+    otherwise) is not learnt, even from a first matrix whose entries are all equal (which
+    cannot tell places apart): every matrix is that assembly's."""
     rng = np.random.default_rng(6)
     scipys = _scipy_assembly(12, 4, 9)
 
@@ -201,9 +231,10 @@ def test_a_structure_whose_puts_differ_from_scipys_assembly_stays_scipys():
 
     assemble = barrier.BarrierJacobian()
     J_eq, J_ineq, s = _jacobians(rng)
+    if first_values == "all ones":
+        J_eq.data[:], J_ineq.data[:], s[:] = 1.0, 1.0, 1.0
     for _ in range(3):
-        J_eq.data = rng.normal(size=J_eq.nnz)
         ours = assemble(J_eq, J_ineq, s, 12, slack_first)
         assert barrier._identical(ours, slack_first(J_eq, J_ineq, s))
-        assert not barrier._identical(ours, scipys(J_eq, J_ineq, s))
+        J_eq.data, J_ineq.data = rng.normal(size=J_eq.nnz), rng.normal(size=J_ineq.nnz)
     assert assemble._places is None

@@ -7,7 +7,7 @@ masks and converts them in a new CSR array. A shooting problem's Jacobians keep 
 structure through a solve, so :class:`BarrierJacobian` works the structure out once, by SciPy's
 own assembly, and then only copies the values and slacks into their places: the same matrix, bit
 for bit, and the same index dtype. A structure whose assembly by puts does not reproduce SciPy's
-(checked once per structure, on the values at hand) is left to SciPy's code.
+(checked once per structure, on distinct probe values) is left to SciPy's code.
 """
 
 from __future__ import annotations
@@ -33,12 +33,11 @@ class BarrierJacobian:
         ``scipy_assemble(J_eq, J_ineq, s)`` is SciPy's assembly: it defines each new structure
         and serves whatever puts cannot.
         """
-        if not all(np.asarray(a).dtype == np.float64 for a in (J_eq.data, J_ineq.data, s)):
+        if not (getattr(J_eq, "format", None) == getattr(J_ineq, "format", None) == "csr"):
             return scipy_assemble(J_eq, J_ineq, s)
         if not self._fits(J_eq, J_ineq, n_vars):
-            assembled = scipy_assemble(J_eq, J_ineq, s)
-            self._learn(J_eq, J_ineq, s, n_vars, assembled)
-            return assembled
+            self._learn(J_eq, J_ineq, s, n_vars, scipy_assemble)
+            return scipy_assemble(J_eq, J_ineq, s)
         if self._places is None:  # a structure whose puts did not reproduce SciPy's
             return scipy_assemble(J_eq, J_ineq, s)
         return self._put(J_eq, J_ineq, s)
@@ -51,15 +50,21 @@ class BarrierJacobian:
             and all(np.array_equal(a, b) for a, b in zip(key[1], _structure(J_eq, J_ineq), strict=True))
         )
 
-    def _learn(self, J_eq, J_ineq, s, n_vars: int, assembled) -> None:
-        """Remember the structure of ``(J_eq, J_ineq)`` and, if puts reproduce SciPy's
-        ``assembled`` matrix of it bit for bit, where the values go."""
+    def _learn(self, J_eq, J_ineq, s, n_vars: int, scipy_assemble: Callable) -> None:
+        """Remember the structure of ``(J_eq, J_ineq)`` and, if puts reproduce SciPy's assembly of
+        it bit for bit, where the values go. The check assembles distinct probe values (every
+        entry and slack its own number), so that no two places can be confused."""
         self._key = (
             (n_vars, J_eq.shape, J_ineq.shape),
             tuple(a.copy() for a in _structure(J_eq, J_ineq)),
         )
         self._places = None
         n_eq, n_ineq = J_eq.shape[0], J_ineq.shape[0]
+        probe_eq, probe_ineq = J_eq.copy(), J_ineq.copy()
+        probe_eq.data = np.arange(1.0, J_eq.nnz + 1)
+        probe_ineq.data = np.arange(J_eq.nnz + 1.0, J_eq.nnz + J_ineq.nnz + 1)
+        probe_s = -np.arange(1.0, np.size(s) + 1)
+        assembled = scipy_assemble(probe_eq, probe_ineq, probe_s)
         if not (sparse.issparse(assembled) and assembled.format == "csr" and n_ineq > 0):
             return
         slack = np.zeros(assembled.nnz, dtype=bool)
@@ -75,8 +80,7 @@ class BarrierJacobian:
             assembled.indptr.copy(),
             assembled.shape,
         )
-        mine = self._put(J_eq, J_ineq, s)
-        if not _identical(mine, assembled):
+        if not _identical(self._put(probe_eq, probe_ineq, probe_s), assembled):
             self._places = None
 
     def _put(self, J_eq, J_ineq, s):

@@ -152,8 +152,9 @@ class BarrierKKT:
 
 
 def _norm(x: np.ndarray) -> float:
-    """``np.linalg.norm(x)`` of a real vector, computed as it computes it (``sqrt(x . x)``),
-    without its dispatch."""
+    """``np.linalg.norm(x)`` of a float64 vector, computed as it computes it (``sqrt(x . x)`` of
+    the vector made contiguous), without its dispatch."""
+    x = x.ravel(order="K")
     return math.sqrt(x.dot(x))
 
 

@@ -1,6 +1,6 @@
 """Where the project takes over parts of SciPy's ``trust-constr``, in a solver's thread only.
 
-trust-constr has no options for these, so importing this module replaces six names in its
+trust-constr has no options for these, so importing this module replaces six names in SciPy's
 modules (:data:`INSTALLED` lists those it found; a SciPy laid out otherwise keeps its own
 code). Each replacement acts only in a thread marked by :func:`mark_solver_thread` (a
 :class:`~modular_robots.ocp.solver.ShootingSolver`'s); anywhere else it is SciPy's code,
@@ -139,7 +139,8 @@ def hessian_update(self):
     """SciPy's ``VectorFunction._update_hess``; in a solver's thread, a quasi-Newton update takes
     the gradient change ``J^T v - J_prev^T v`` by :func:`~modular_robots.ocp.products.rmatvec`
     (SciPy's own kernel, without building the transposes)."""
-    if self.H_updated or not in_solver_thread() or not isinstance(self._orig_hess, HessianUpdateStrategy):
+    quasi_newton = isinstance(self._orig_hess, HessianUpdateStrategy) and not callable(self._orig_hess)
+    if self.H_updated or not in_solver_thread() or not quasi_newton:
         return scipy_hessian_update(self)
     self._update_jac()
     if self.x_prev is not None and self.J_prev is not None:
