@@ -8,10 +8,11 @@ solver iteration, :meth:`ShootingSolver.close` stops the solver cleanly (its cal
 one of the two threads runs at any moment, so the problem's Pinocchio data is never shared.
 A solver failure never raises into the caller: the generator ends and :attr:`outcome` says why.
 
-Its thread is marked for :mod:`~modular_robots.ocp.trust_constr`, which takes over four parts
-of trust-constr there: its projections and canonical constraints, computed from the problem's
-structure, its barrier function, vectorised, and its SQP loop, which repeats a refused step's
-second-order correction (:mod:`~modular_robots.ocp.sqp`).
+Its thread is marked for :mod:`~modular_robots.ocp.trust_constr`, which takes over six parts
+of trust-constr there: its projections, canonical constraints and barrier Jacobian, computed from
+the problem's structure, its barrier function, vectorised, the quasi-Newton update's transposed
+products, and its SQP loop, which repeats a refused step's second-order correction
+(:mod:`~modular_robots.ocp.sqp`).
 """
 
 from __future__ import annotations
