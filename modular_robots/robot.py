@@ -205,15 +205,27 @@ class RobotModel:
     # -- dynamics ---------------------------------------------------------------------------
     def rnea(self, q, v, a) -> np.ndarray:
         """Inverse dynamics: motor-side joint torques/forces [N m or N] for ``(q, v, a)``, gravity,
-        armature and friction included."""
-        tau = pin.rnea(self.model, self.data, q, v, a).copy()
+        armature and friction included; ``(nv,)``, or ``(K, nv)`` for ``K`` rows of each."""
+        tau = self._rows(pin.rnea, q, v, a)
         return tau + self.friction(v) if self.has_friction else tau
 
     def aba(self, q, v, tau) -> np.ndarray:
-        """Forward dynamics: joint accelerations for motor torques ``tau`` at ``(q, v)``."""
+        """Forward dynamics: joint accelerations for motor torques ``tau`` at ``(q, v)``; ``(nv,)``,
+        or ``(K, nv)`` for ``K`` rows of each."""
         if self.has_friction:
             tau = np.asarray(tau, dtype=float) - self.friction(v)
-        return pin.aba(self.model, self.data, q, v, tau).copy()
+        return self._rows(pin.aba, q, v, tau)
+
+    def _rows(self, algorithm, q, v, third) -> np.ndarray:
+        """``algorithm(model, data, q, v, third)`` at one point or at each of ``K`` rows (a copy:
+        Pinocchio returns a view of its data)."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 1:
+            return algorithm(self.model, self.data, q, v, third).copy()
+        out = np.empty((len(q), self.nv))
+        for k, row in enumerate(zip(q, np.asarray(v, dtype=float), np.asarray(third, dtype=float))):
+            out[k] = algorithm(self.model, self.data, *row)
+        return out
 
     def rnea_derivatives(self, q, v, a) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(dtau/dq, dtau/dv, dtau/da = M)`` at ``(q, v, a)``."""

@@ -265,15 +265,16 @@ def test_tool_position_and_jacobian_match_spec_chain(cat, name):
 @pytest.mark.parametrize("family,name", DYNAMICS_CASES, ids=[f"{f}:{n}" for f, n in DYNAMICS_CASES])
 def test_rnea_matches_independent_newton_euler(cat, family, name, payload):
     """r.rnea(q, v, a) == the test's Newton-Euler from catalogue numbers (gravity, Coriolis,
-    centripetal and inertial terms; payload sphere at tool0)."""
+    centripetal and inertial terms; payload sphere at tool0), one point at a time and as rows."""
     mods = modules_of(name, cat)
     r = robot_model(Composition.from_name(name, cat), cat, payload)
     gravity = r.model.gravity.linear.copy()
     rng = np.random.default_rng(_seed("rnea", name, payload))
-    for _ in range(4):
-        q, v, a = random_state(mods, rng)
-        expected = newton_euler(mods, q, v, a, payload, gravity)
-        np.testing.assert_allclose(r.rnea(q, v, a), expected, rtol=1e-9, atol=1e-9)
+    states = [random_state(mods, rng) for _ in range(4)]
+    expected = np.array([newton_euler(mods, q, v, a, payload, gravity) for q, v, a in states])
+    for (q, v, a), tau in zip(states, expected):
+        np.testing.assert_allclose(r.rnea(q, v, a), tau, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(r.rnea(*map(np.array, zip(*states))), expected, rtol=1e-9, atol=1e-9)
 
 
 def test_gravity_is_spec_gravity(cat):
@@ -329,16 +330,18 @@ def test_mass_matrix_spd_and_equals_newton_euler_columns(cat, family, name, payl
 @pytest.mark.parametrize("family,name", DYNAMICS_CASES, ids=[f"{f}:{n}" for f, n in DYNAMICS_CASES])
 def test_aba_inverts_independent_inverse_dynamics(cat, family, name, payload):
     """aba(q, v, tau) == a when tau comes from the test's Newton-Euler (not from Pinocchio),
-    and aba(q, v, rnea(q, v, a)) == a (ABA and RNEA are different algorithms)."""
+    and aba(q, v, rnea(q, v, a)) == a (ABA and RNEA are different algorithms); one point at a
+    time and as rows."""
     mods = modules_of(name, cat)
     r = robot_model(Composition.from_name(name, cat), cat, payload)
     gravity = r.model.gravity.linear.copy()
     rng = np.random.default_rng(_seed("aba", name, payload))
-    for _ in range(3):
-        q, v, a = random_state(mods, rng)
-        tau = newton_euler(mods, q, v, a, payload, gravity)
-        np.testing.assert_allclose(r.aba(q, v, tau), a, rtol=1e-8, atol=1e-8)
-        np.testing.assert_allclose(r.aba(q, v, r.rnea(q, v, a)), a, rtol=1e-8, atol=1e-8)
+    q, v, a = map(np.array, zip(*(random_state(mods, rng) for _ in range(3))))
+    tau = np.array([newton_euler(mods, *row, payload, gravity) for row in zip(q, v, a)])
+    for k in range(len(q)):
+        np.testing.assert_allclose(r.aba(q[k], v[k], tau[k]), a[k], rtol=1e-8, atol=1e-8)
+        np.testing.assert_allclose(r.aba(q[k], v[k], r.rnea(q[k], v[k], a[k])), a[k], rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(r.aba(q, v, tau), a, rtol=1e-8, atol=1e-8)
 
 
 # --------------------------------------------------------------------------------------------

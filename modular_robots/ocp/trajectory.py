@@ -208,7 +208,7 @@ def sample_trajectory(problem, y: np.ndarray) -> Trajectory:
         t, qd = _dense_velocities(robot, tr, nodes, controls, tf / N)
         qdd = np.vstack([np.diff(qd, axis=0) / np.diff(t)[:, None], np.zeros(nv)])
     q, qd = _chain(t, nodes[0, :nv], nodes[0, nv:], qdd)
-    tau = np.array([robot.rnea(*row) for row in zip(q, qd, qdd)])
+    tau = robot.rnea(q, qd, qdd)
     tool = np.array([robot.tool_position(x) for x in q])
     return Trajectory(
         t, q, qd, qdd, tau, tool, robot.velocity_limit, robot.effort_limit, problem.velocity_bound, problem.effort_bound
@@ -274,7 +274,7 @@ def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> T
     q, qd, qdd = trajectory.at(t)
     h = np.diff(t)[:, None]
     mean = np.vstack([(qd[1:] - qd[:-1]) / h, np.zeros(robot.nv)])
-    tau = np.array([robot.rnea(*row) for row in zip(q, qd, mean)])
+    tau = robot.rnea(q, qd, mean)
     tool = np.array([robot.tool_position(x) for x in q])
     return Trajectory(
         t,

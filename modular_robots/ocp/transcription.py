@@ -69,9 +69,11 @@ class Transcription:
         """Controls ``(N, nv)`` that realise node accelerations ``a`` from node states ``(q, v)``."""
         raise NotImplementedError
 
-    def torque(self, robot: RobotModel, node: np.ndarray, u: np.ndarray, s: float) -> np.ndarray:
+    def torque(self, robot: RobotModel, node: np.ndarray, u: np.ndarray, s) -> np.ndarray:
         """The torque applied ``s`` seconds into an interval that starts at planned state ``node``
-        with control ``u`` (the control law that verification re-integrates)."""
+        with control ``u`` (the control law that verification re-integrates): ``(nv,)``, or
+        ``(B, nv)`` for ``B`` such points at once (``node`` ``(B, 2 nv)``, ``u`` ``(B, nv)``,
+        ``s`` ``(B,)``)."""
         raise NotImplementedError
 
 
@@ -85,10 +87,10 @@ class ForwardDynamics(Transcription):
         return positive_or_one(robot.effort_limit)
 
     def initial_controls(self, robot, q, v, a):
-        return np.array([robot.rnea(qi, vi, ai) for qi, vi, ai in zip(q, v, a)])
+        return robot.rnea(q, v, a)
 
     def torque(self, robot, node, u, s):
-        return np.asarray(u, dtype=float)
+        return np.array(u, dtype=float)
 
     def propagate(self, robot, x0, u, tf, intervals, substeps, derivatives):
         n_int, n = x0.shape
@@ -180,9 +182,10 @@ class InverseDynamics(Transcription):
 
     def torque(self, robot, node, u, s):
         nv = robot.nv
-        q = node[:nv] + node[nv:] * s + 0.5 * u * s * s
-        v = node[nv:] + u * s
-        return robot.rnea(q, v, u)
+        s = np.asarray(s, dtype=float)[..., None]
+        q = node[..., :nv] + node[..., nv:] * s + 0.5 * u * s * s
+        v = node[..., nv:] + u * s
+        return robot.rnea(q, v, np.broadcast_to(u, q.shape))
 
     def propagate(self, robot, x0, u, tf, intervals, substeps, derivatives):
         n_int, n = x0.shape
