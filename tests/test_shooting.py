@@ -31,12 +31,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from click.testing import CliRunner
-from scipy.integrate import solve_ivp
+from scipy.integrate import DOP853, solve_ivp
 
 from modular_robots.cli import main
 from modular_robots.composition import Composition
 from modular_robots.exceptions import CompositionError
 from modular_robots.feasibility import check_composition
+from modular_robots.ocp import verification
 from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem, make_candidate
 from modular_robots.ocp.shooting import NonFiniteError, ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
@@ -610,10 +611,11 @@ def test_verification_defect_catches_a_broken_plan():
 
 
 def substep_by_substep(problem: ShootingProblem, y: np.ndarray, points: int = 8):
-    """A plain reference for :func:`verify`: each sub-step re-integrated on its own (DOP853, the
-    same tolerances) from its planned state, the plan's torque law written out here, every grid
-    point's clearance from FCL one configuration at a time. Returns the defect, the grid's
-    ``(q, v, tau)`` and clearances, and the terminal tool position."""
+    """A plain reference for :func:`verify`: each sub-step re-integrated on its own by SciPy's
+    ``solve_ivp`` (DOP853, the same tolerances) from its planned state, the plan's torque law
+    written out here, every grid point's clearance from FCL one configuration at a time, and the
+    last interval re-integrated whole. Returns the defect, the grid's ``(q, v, tau)`` and
+    clearances, and the state at ``tf``."""
     robot, nv = problem.robot, problem.nv
     tf, nodes, controls = problem.unpack(y)
     N, S = problem.intervals, problem.substeps
@@ -626,20 +628,16 @@ def substep_by_substep(problem: ShootingProblem, y: np.ndarray, points: int = 8)
             return u
         return robot.rnea(node[:nv] + node[nv:] * s + 0.5 * u * s * s, node[nv:] + u * s, u)
 
+    def rhs(m):
+        return lambda s, x: np.concatenate([x[nv:], robot.aba(x[:nv], x[nv:], torque(m, s))])
+
     planned = problem.transcription.propagate(robot, nodes[:-1], controls, tf, N, S, False).states
     defect, rows = 0.0, []
     for m in range(N):
         gap = 0.0
         for j in range(S):
-            sol = solve_ivp(
-                lambda s, x, m=m: np.concatenate([x[nv:], robot.aba(x[:nv], x[nv:], torque(m, s))]),
-                (j * hs, (j + 1) * hs),
-                planned[m, j],
-                method="DOP853",
-                rtol=1e-10,
-                atol=1e-10,
-                dense_output=True,
-            )
+            span = (j * hs, (j + 1) * hs)
+            sol = solve_ivp(rhs(m), span, planned[m, j], method="DOP853", rtol=1e-10, atol=1e-10, dense_output=True)
             target = planned[m, j + 1] if j < S - 1 else nodes[m + 1]
             gap = gap + np.abs(sol.y[:, -1] - target) / problem.x_scale
             grid = np.linspace(j * hs, (j + 1) * hs, points + 1)[: -1 if j < S - 1 else None]
@@ -648,33 +646,44 @@ def substep_by_substep(problem: ShootingProblem, y: np.ndarray, points: int = 8)
     q = np.array([x[:nv] for x, _ in rows])
     v = np.array([x[nv:] for x, _ in rows])
     tau = np.array([t for _, t in rows])
-    clearance = np.array([problem.collision.min_distance(qk) for qk in q])
-    return defect, q, v, tau, clearance
+    clearance = np.array([problem.collision.min_distance(qk) for qk in q]) if problem.collision else np.array([np.inf])
+    last = solve_ivp(rhs(N - 1), (0.0, S * hs), nodes[N - 1], method="DOP853", rtol=1e-10, atol=1e-10)
+    return defect, q, v, tau, clearance, last.y[:, -1]
 
 
-@pytest.mark.parametrize(
-    ("name", "transcription"), [(MIXED, "inverse"), (REVOLUTE, "forward"), ("base-PB21-L2-PB21-L4-L3", "inverse")]
-)
-def test_verification_integrates_all_substeps_as_each_on_its_own(paper, name, transcription):
-    """:func:`verify` integrates every sub-step at once (one adaptive step sequence, tolerances
-    divided by the square root of their number); its figures equal those of a plain
-    one-integration-per-sub-step reference. Off the optimum (a perturbed guess) the defects and
-    clearances are far from zero, so agreement is not agreement at zero; the IMPROV assembly adds
-    friction to both torque laws."""
-    if name.startswith("base"):
-        scenario = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
-        composition = Composition.from_name(name, scenario.catalog)
-        verdict = check_composition(composition, scenario.catalog, scenario.task)
-        settings = OptimizerSettings(nodes=4, substeps=3)
-        problem = composition_problem(
-            composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, settings
-        )
+def improv_problem(transcription: str, nodes: int = 4, substeps: int = 3) -> ShootingProblem:
+    """An IMPROV assembly (armature, viscous and smoothed Coulomb friction in the drives)."""
+    scenario = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
+    composition = Composition.from_name("base-PB21-L2-PB21-L4-L3", scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    settings = OptimizerSettings(nodes=nodes, substeps=substeps, transcription=transcription)
+    return composition_problem(composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, settings)
+
+
+VERIFY_CASES = [
+    (MIXED, "inverse", True, 3),
+    (REVOLUTE, "forward", True, 3),
+    (MIXED, "inverse", False, 1),
+    ("IMPROV", "inverse", True, 3),
+    ("IMPROV", "forward", True, 3),
+]
+
+
+@pytest.mark.parametrize(("name", "transcription", "obstacles", "substeps"), VERIFY_CASES)
+def test_verification_integrates_all_substeps_as_each_on_its_own(paper, name, transcription, obstacles, substeps):
+    """:func:`verify` integrates every sub-step at once (one adaptive step sequence, each
+    sub-step's own error test); its figures equal those of a plain one-integration-per-sub-step
+    reference. Off the optimum (a perturbed guess) the defects and clearances are far from zero,
+    so agreement is not agreement at zero; the IMPROV assembly adds friction to both torque laws;
+    one case has no obstacles and one sub-step per interval."""
+    if name == "IMPROV":
+        problem = improv_problem(transcription)
         assert problem.robot.has_friction
     else:
-        problem = paper(name, transcription)
+        problem = paper(name, transcription, obstacles=obstacles, substeps=substeps)
     y = perturbed_guess(problem, seed=4)
     got = verify(problem, y)
-    defect, q, v, tau, clearance = substep_by_substep(problem, y)
+    defect, q, v, tau, clearance, final = substep_by_substep(problem, y)
     robot = problem.robot
     assert defect > 1e-3 and got.max_defect == pytest.approx(defect, rel=1e-6)
     assert got.grid_points == len(q)
@@ -684,6 +693,57 @@ def test_verification_integrates_all_substeps_as_each_on_its_own(paper, name, tr
     assert got.position_excess == pytest.approx(excess, abs=1e-9)
     np.testing.assert_allclose(got.velocity_share, np.abs(v).max(axis=0) / robot.velocity_limit, rtol=1e-8)
     np.testing.assert_allclose(got.effort_share, np.abs(tau).max(axis=0) / robot.effort_limit, rtol=1e-8)
+    error = np.linalg.norm(robot.tool_position(final[: problem.nv]) - robot.tool_position(problem.q_goal))
+    assert got.terminal_error == pytest.approx(error, rel=1e-6, abs=1e-9)
+    assert got.terminal_speed == pytest.approx(np.abs(final[problem.nv :]).max(), rel=1e-6, abs=1e-9)
+
+
+def test_verification_one_substep_at_a_time_gives_the_same_figures(paper, monkeypatch):
+    """The fallback for plans whose joint integration takes too many steps (each sub-step on its
+    own) measures the same plan as the joint integration does."""
+    problem = paper(MIXED, "inverse")
+    y = perturbed_guess(problem, seed=4)
+    joint = verify(problem, y)
+    monkeypatch.setattr(verification, "JOINT_STEPS", 0)
+    alone = verify(problem, y)
+    for field in ("max_defect", "min_clearance", "terminal_error", "velocity_ratio", "torque_ratio"):
+        assert getattr(alone, field) == pytest.approx(getattr(joint, field), rel=1e-7), field
+
+
+def test_stacked_error_norm_is_the_worst_of_each_systems_own():
+    """The joint integration's error norm is the largest of the DOP853 norms each sub-step would
+    have alone (SciPy's own formula, applied block by block), so no sub-step's error hides in the
+    others' (a norm over the whole stack would let one block's error grow with the others')."""
+    rng = np.random.default_rng(3)
+    blocks, n = 5, 4
+    y0 = rng.standard_normal(blocks * n)
+    stacked = verification._StackedDOP853(lambda t, x: -x, 1.0, y0, 2.0, blocks, rtol=1e-10, atol=1e-10)
+    K = rng.standard_normal(stacked.K.shape)
+    K[:, :n] *= 1e3  # one block much worse than the rest
+    scale = 1e-10 + 1e-10 * np.abs(y0)
+    got = stacked._estimate_error_norm(K, 0.01, scale)
+    alone = [
+        DOP853(lambda t, x: -x, 1.0, y0[b * n : (b + 1) * n], 2.0)._estimate_error_norm(
+            K[:, b * n : (b + 1) * n], 0.01, scale[b * n : (b + 1) * n]
+        )
+        for b in range(blocks)
+    ]
+    assert got == pytest.approx(max(alone), rel=1e-12)
+    whole = DOP853(lambda t, x: -x, 1.0, y0, 2.0)._estimate_error_norm(K, 0.01, scale)
+    assert whole < 0.5 * got
+
+
+@pytest.mark.parametrize("factor", [1e2, 1e4])
+def test_verification_fails_a_plan_that_blows_up_without_raising(paper, factor):
+    """Controls scaled far beyond any limit make the re-integration diverge (x 1e2) or the planned
+    states overflow already (x 1e4): verification fails the plan at once, it neither raises nor
+    follows the divergence down to steps of 1e-300 s."""
+    problem = paper(MIXED, "forward")
+    y = problem.initial_guess()
+    y[-problem.nv :] *= factor
+    with np.errstate(all="ignore"):
+        check = verify(problem, y)
+    assert not check.passed and check.grid_points == 0
 
 
 # --------------------------------------------------------------------------------------------
