@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.integrate import DOP853, OdeSolution
+from scipy.integrate import DOP853
 
 from .shooting import ShootingProblem
 
@@ -139,11 +139,12 @@ JOINT_STEPS = 64
 _TOO_LONG = "too long"
 
 
-def _integrate(problem, nodes, controls, starts, x0, duration, rtol, atol, max_steps=None, dense=True):
+def _integrate(problem, nodes, controls, starts, x0, duration, rtol, atol, grid=(), max_steps=None):
     """Integrate ``B`` systems (:func:`_dynamics`) from states ``x0`` ``(B, 2 nv)`` for ``duration``
-    seconds with :class:`_StackedDOP853`: the end states ``(B, 2 nv)`` and (if ``dense``) a dense
-    solution of ``t`` in ``[0, duration]`` (states flattened), None if the integration fails, or
-    :data:`_TOO_LONG` after ``max_steps`` steps.
+    seconds with :class:`_StackedDOP853`. Returns the end states ``(B, 2 nv)`` and the states
+    ``(B, len(grid), 2 nv)`` at the times ``grid`` (increasing, in ``[0, duration]``), each read
+    from the interpolant of the step it falls in as the integration passes it (memory: the
+    results only); None if the integration fails, :data:`_TOO_LONG` after ``max_steps`` steps.
 
     Time runs from ``duration`` to ``2 duration``: SciPy refuses a step below ten spacings of the
     floating-point numbers at ``t``, which at ``t = 0`` is 1e-322 s, so a plan that blows up would
@@ -154,40 +155,40 @@ def _integrate(problem, nodes, controls, starts, x0, duration, rtol, atol, max_s
         return None
     rhs = _dynamics(problem, nodes, controls, np.asarray(starts, dtype=float) - duration)
     solver = _StackedDOP853(rhs, duration, x0.ravel(), 2 * duration, len(x0), rtol=rtol, atol=atol)
-    times, pieces = [duration], []
+    times = np.asarray(grid, dtype=float) + duration
+    at = np.empty((len(times), x0.size))
+    done, steps = 0, 0
     while solver.status == "running":
-        if max_steps is not None and len(pieces) == max_steps:
+        if steps == max_steps:
             return _TOO_LONG
         solver.step()
+        steps += 1
         if solver.status == "failed":
             return None
-        times.append(solver.t)
-        pieces.append(solver.dense_output() if dense else None)
-    if not dense:
-        return solver.y.reshape(x0.shape), None
-    solution = OdeSolution(times, pieces)
-    return solver.y.reshape(x0.shape), lambda t: solution(np.asarray(t) + duration)
+        # the last step takes any grid time that rounding put beyond the end
+        upto = len(times) if solver.status == "finished" else int(np.searchsorted(times, solver.t, side="right"))
+        if upto > done:
+            at[done:upto] = solver.dense_output()(times[done:upto]).T
+            done = upto
+    return solver.y.reshape(x0.shape), at.reshape(len(times), *x0.shape).transpose(1, 0, 2)
 
 
-def _substeps(problem, nodes, controls, starts, x0, duration, rtol, atol):
+def _substeps(problem, nodes, controls, starts, x0, duration, rtol, atol, grid):
     """Every one of ``B`` sub-steps integrated from ``x0`` for ``duration`` s: at once, or one at a
     time if that takes more than :data:`JOINT_STEPS` steps. Returns the end states ``(B, 2 nv)`` and
-    ``states(t)``, the states ``(B, len(t), 2 nv)`` at times ``t`` into the sub-steps; None if an
+    the states ``(B, len(grid), 2 nv)`` at the times ``grid`` into the sub-steps; None if an
     integration fails."""
-    joint = _integrate(problem, nodes, controls, starts, x0, duration, rtol, atol, JOINT_STEPS)
-    if joint is None:
-        return None
+    joint = _integrate(problem, nodes, controls, starts, x0, duration, rtol, atol, grid, JOINT_STEPS)
     if joint is not _TOO_LONG:
-        end, solution = joint
-        return end, lambda t: solution(t).reshape(len(x0), -1, len(t)).transpose(0, 2, 1)
+        return joint
     runs = []
     for b in range(len(x0)):
         one = slice(b, b + 1)
-        run = _integrate(problem, nodes[one], controls[one], starts[one], x0[one], duration, rtol, atol)
+        run = _integrate(problem, nodes[one], controls[one], starts[one], x0[one], duration, rtol, atol, grid)
         if run is None:
             return None
         runs.append(run)
-    return np.concatenate([end for end, _ in runs]), lambda t: np.stack([solution(t).T for _, solution in runs])
+    return np.concatenate([end for end, _ in runs]), np.concatenate([at for _, at in runs])
 
 
 def verify(
@@ -213,15 +214,15 @@ def verify(
     starts = np.tile(np.arange(S) * hs, N)  # each sub-step's offset into its interval [s]
     interval_nodes, interval_controls = np.repeat(nodes[:N], S, axis=0), np.repeat(controls, S, axis=0)
     x0 = planned[:, :S].reshape(N * S, 2 * nv)
-    run = _substeps(problem, interval_nodes, interval_controls, starts, x0, hs, rtol, atol)
-    if run is None:
-        return Verification(np.inf, np.inf, np.inf, -np.inf, np.inf, np.inf, np.inf, 0, S)
-    end, states_at = run
-    gap = np.abs(end.reshape(N, S, 2 * nv) - ends) / problem.x_scale
-    defect = float(np.max(gap.sum(axis=1)))
     # The dense grid: points_per_substep points per sub-step, and the interval's end after its last.
     grid = np.linspace(0.0, hs, points_per_substep + 1)
-    dense = states_at(grid).reshape(N, S, len(grid), 2 * nv)
+    run = _substeps(problem, interval_nodes, interval_controls, starts, x0, hs, rtol, atol, grid)
+    if run is None:
+        return Verification(np.inf, np.inf, np.inf, -np.inf, np.inf, np.inf, np.inf, 0, S)
+    end, dense = run
+    gap = np.abs(end.reshape(N, S, 2 * nv) - ends) / problem.x_scale
+    defect = float(np.max(gap.sum(axis=1)))
+    dense = dense.reshape(N, S, len(grid), 2 * nv)
     seconds = starts.reshape(N, S, 1) + grid
     samples = np.zeros((N, S, len(grid)), dtype=bool)
     samples[:, :, :-1] = samples[:, -1, -1] = True
@@ -229,14 +230,14 @@ def verify(
     q, v = states[:, :nv], states[:, nv:]
     where = np.nonzero(samples)
     torques = tr.torque(robot, nodes[where[0]], controls[where[0]], seconds[samples])
-    clearance = float(problem.collision.closest_many(q)[0].min()) if problem.collision is not None else np.inf
+    clearance = np.inf
+    if problem.collision is not None:  # an interval's samples at a time: bounded memory
+        clearance = min(float(problem.collision.closest_many(part)[0].min()) for part in np.array_split(q, N))
     pos_excess = float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span))
     vel_share = np.max(np.abs(v) / vmax, axis=0)
     tau_share = np.max(np.abs(torques) / tmax, axis=0)
     points = len(states)
-    last = _integrate(
-        problem, nodes[N - 1 : N], controls[N - 1 :], np.zeros(1), nodes[N - 1 : N], S * hs, rtol, atol, dense=False
-    )
+    last = _integrate(problem, nodes[N - 1 : N], controls[N - 1 :], np.zeros(1), nodes[N - 1 : N], S * hs, rtol, atol)
     x = last[0][0] if last is not None else np.full(2 * nv, np.inf)
     error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(problem.q_goal)))
     return Verification(
