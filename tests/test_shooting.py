@@ -191,6 +191,16 @@ def ur5(payload: float) -> RobotModel:
     return RobotModel(model, "tool0", [Primitive("payload", "tool0", 0.05)], name="ur5")
 
 
+def improv_problem(transcription: str, nodes: int = 4, substeps: int = 3) -> ShootingProblem:
+    """An IMPROV assembly (armature, viscous and smoothed Coulomb friction in the drives)."""
+    scenario = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
+    composition = Composition.from_name("base-PB21-L2-PB21-L4-L3", scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    assert verdict.passed, verdict.message
+    settings = OptimizerSettings(nodes=nodes, substeps=substeps, transcription=transcription)
+    return composition_problem(composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, settings)
+
+
 # --------------------------------------------------------------------------------------------
 # paper compositions
 # --------------------------------------------------------------------------------------------
@@ -305,14 +315,7 @@ def test_exact_hessian_includes_the_drives_friction():
     """On an IMPROV assembly (armature, viscous and smoothed Coulomb friction in the motor torque)
     the exact Hessian still equals differences of the exact Jacobian, and the friction's
     curvature matters: without it the velocity block would differ."""
-    scenario = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
-    composition = Composition.from_name("base-PB21-L2-PB21-L4-L3", scenario.catalog)
-    verdict = check_composition(composition, scenario.catalog, scenario.task)
-    assert verdict.passed, verdict.message
-    settings = OptimizerSettings(nodes=4, substeps=2)
-    problem = composition_problem(
-        composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, settings
-    )
+    problem = improv_problem("inverse", substeps=2)
     assert problem.robot.has_friction
     y = perturbed_guess(problem, seed=9)
     rows = problem.rows_of("continuity", "path", "midpoint", "torque")
@@ -649,15 +652,6 @@ def substep_by_substep(problem: ShootingProblem, y: np.ndarray, points: int = 8)
     clearance = np.array([problem.collision.min_distance(qk) for qk in q]) if problem.collision else np.array([np.inf])
     last = solve_ivp(rhs(N - 1), (0.0, S * hs), nodes[N - 1], method="DOP853", rtol=1e-10, atol=1e-10)
     return defect, q, v, tau, clearance, last.y[:, -1]
-
-
-def improv_problem(transcription: str, nodes: int = 4, substeps: int = 3) -> ShootingProblem:
-    """An IMPROV assembly (armature, viscous and smoothed Coulomb friction in the drives)."""
-    scenario = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
-    composition = Composition.from_name("base-PB21-L2-PB21-L4-L3", scenario.catalog)
-    verdict = check_composition(composition, scenario.catalog, scenario.task)
-    settings = OptimizerSettings(nodes=nodes, substeps=substeps, transcription=transcription)
-    return composition_problem(composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, settings)
 
 
 VERIFY_CASES = [

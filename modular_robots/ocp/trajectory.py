@@ -237,12 +237,9 @@ def _dense_velocities(robot: RobotModel, tr, nodes: np.ndarray, controls: np.nda
     k = max(1, math.ceil(h_interval / FORWARD_ROW_STEP - 1e-9))
     local = np.linspace(0.0, h_interval, k + 1)
     times, velocities = [], []
-    for m, (node, u) in enumerate(zip(nodes[:-1], controls)):
-
-        def rhs(s, x, node=node, u=u):
-            return np.concatenate([x[nv:], robot.aba(x[:nv], x[nv:], tr.torque(robot, node, u, s))])
-
-        sol = solve_ivp(rhs, (0.0, h_interval), node, method="DOP853", rtol=1e-12, atol=1e-12, t_eval=local[:-1])
+    for m in range(len(controls)):
+        rhs = tr.plan_dynamics(robot, nodes[m : m + 1], controls[m : m + 1], np.zeros(1))
+        sol = solve_ivp(rhs, (0.0, h_interval), nodes[m], method="DOP853", rtol=1e-12, atol=1e-12, t_eval=local[:-1])
         times.append(m * h_interval + local[:-1])
         velocities.append(sol.y.T[:, nv:] if sol.success else np.full((k, nv), np.nan))
     t = np.concatenate([*times, [len(controls) * h_interval]])

@@ -76,6 +76,20 @@ class Transcription:
         ``s`` ``(B,)``)."""
         raise NotImplementedError
 
+    def plan_dynamics(self, robot: RobotModel, nodes: np.ndarray, controls: np.ndarray, starts: np.ndarray):
+        """``xdot(s, x)`` of ``B`` states at once under the plan's control law (:meth:`torque`),
+        ``x`` the states ``(B, 2 nv)`` flattened: state ``b`` is ``starts[b] + s`` seconds into the
+        interval that starts at ``nodes[b]`` with control ``controls[b]``. What verification and
+        the forward transcription's dense rows re-integrate."""
+        nv = robot.nv
+
+        def rhs(s, flat):
+            x = flat.reshape(len(nodes), 2 * nv)
+            qdd = robot.aba(x[:, :nv], x[:, nv:], self.torque(robot, nodes, controls, starts + s))
+            return np.concatenate([x[:, nv:], qdd], axis=1).ravel()
+
+        return rhs
+
 
 class ForwardDynamics(Transcription):
     """``u = tau``; ``xdot = (qdot, ABA(q, qdot, tau))`` by RK4 with ``S`` steps per interval."""

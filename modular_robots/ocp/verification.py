@@ -98,20 +98,6 @@ class Verification:
         return out
 
 
-def _dynamics(problem: ShootingProblem, nodes: np.ndarray, controls: np.ndarray, starts):
-    """``xdot(s, x)`` of ``B`` systems at once (``x`` their states ``(B, 2 nv)``, flattened):
-    system ``b`` is ``starts[b] + s`` seconds into the interval that starts at ``nodes[b]`` with
-    control ``controls[b]``, under the torque the plan applies there."""
-    robot, tr, nv = problem.robot, problem.transcription, problem.nv
-
-    def rhs(s, flat):
-        x = flat.reshape(len(nodes), 2 * nv)
-        qdd = robot.aba(x[:, :nv], x[:, nv:], tr.torque(robot, nodes, controls, starts + s))
-        return np.concatenate([x[:, nv:], qdd], axis=1).ravel()
-
-    return rhs
-
-
 class _StackedDOP853(DOP853):
     """SciPy's DOP853 on ``blocks`` independent systems stacked into one state: a step is accepted
     only if every system's own DOP853 error norm accepts it (their largest is the step's norm), so
@@ -140,11 +126,12 @@ _TOO_LONG = "too long"
 
 
 def _integrate(problem, nodes, controls, starts, x0, duration, rtol, atol, grid=(), max_steps=None):
-    """Integrate ``B`` systems (:func:`_dynamics`) from states ``x0`` ``(B, 2 nv)`` for ``duration``
-    seconds with :class:`_StackedDOP853`. Returns the end states ``(B, 2 nv)`` and the states
-    ``(B, len(grid), 2 nv)`` at the times ``grid`` (increasing, in ``[0, duration]``), each read
-    from the interpolant of the step it falls in as the integration passes it (memory: the
-    results only); None if the integration fails, :data:`_TOO_LONG` after ``max_steps`` steps.
+    """Integrate ``B`` sub-steps under the plan's control law (``Transcription.plan_dynamics``)
+    from states ``x0`` ``(B, 2 nv)`` for ``duration`` seconds with :class:`_StackedDOP853`.
+    Returns the end states ``(B, 2 nv)`` and the states ``(B, len(grid), 2 nv)`` at the times
+    ``grid`` (increasing, in ``[0, duration]``), each read from the interpolant of the step it falls
+    in as the integration passes it (memory: the results only); None if the integration fails,
+    :data:`_TOO_LONG` after ``max_steps`` steps.
 
     Time runs from ``duration`` to ``2 duration``: SciPy refuses a step below ten spacings of the
     floating-point numbers at ``t``, which at ``t = 0`` is 1e-322 s, so a plan that blows up would
@@ -153,7 +140,9 @@ def _integrate(problem, nodes, controls, starts, x0, duration, rtol, atol, grid=
     x0 = np.asarray(x0, dtype=float)
     if not np.all(np.isfinite(x0)):
         return None
-    rhs = _dynamics(problem, nodes, controls, np.asarray(starts, dtype=float) - duration)
+    rhs = problem.transcription.plan_dynamics(
+        problem.robot, nodes, controls, np.asarray(starts, dtype=float) - duration
+    )
     solver = _StackedDOP853(rhs, duration, x0.ravel(), 2 * duration, len(x0), rtol=rtol, atol=atol)
     times = np.asarray(grid, dtype=float) + duration
     at = np.empty((len(times), x0.size))
