@@ -16,7 +16,7 @@ from scipy.optimize import SR1, Bounds
 from scipy.optimize._constraints import PreparedConstraint
 from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
 
-from modular_robots.ocp import barrier, canonical, trust_constr
+from modular_robots.ocp import barrier, boxes, canonical, sqp, trust_constr
 from modular_robots.ocp.solver import _SR1, ShootingSolver
 
 from .test_canonical import paper_problem
@@ -62,11 +62,13 @@ def test_outside_a_solver_thread_everything_is_scipys(monkeypatch):
     assert not trust_constr.in_solver_thread()
     monkeypatch.setattr(trust_constr, "scipy_barrier_jacobian", lambda *args: calls.append(args))
     monkeypatch.setattr(trust_constr, "scipy_hessian_update", lambda *args: calls.append(args))
+    monkeypatch.setattr(trust_constr, "scipy_box_intersections", lambda *args: calls.append(args))
+    trust_constr.box_intersections(np.zeros(2), np.ones(2), -np.ones(2), np.ones(2))
     trust_constr.barrier_function(Subproblem(), 1.0, np.zeros(6), np.ones(6))
     J_eq, J_ineq, s = _jacobians(np.random.default_rng(1))
     trust_constr.barrier_jacobian(SimpleNamespace(n_vars=12), J_eq, J_ineq, s)
     trust_constr.hessian_update(SimpleNamespace(H_updated=False, _orig_hess=SR1()))
-    assert len(calls) == 3
+    assert len(calls) == 4
     canonical = trust_constr.SolverCanonical.concatenate([CanonicalConstraint.empty(3)] * 2, True)
     assert type(canonical) is CanonicalConstraint
     bounds = PreparedConstraint(Bounds(-np.ones(3), np.ones(3)), np.zeros(3), sparse_jacobian=True)
@@ -84,9 +86,10 @@ def history(problem) -> tuple[int, str]:
 
 def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(monkeypatch):
     problem = paper_problem()
-    used = {"gathers": 0, "barrier": 0, "puts": 0, "updates": 0}
+    used = {"gathers": 0, "barrier": 0, "puts": 0, "updates": 0, "boxes": 0}
     gathered_jac, barrier_function = canonical._Gather.jac, trust_constr.barrier_function
     put, rmatvec = barrier.BarrierJacobian._put, trust_constr.rmatvec
+    fast_boxes = trust_constr.fast_box_intersections
 
     def counted(name, function, solver_thread_only=False):
         def call(*args):
@@ -103,6 +106,8 @@ def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(m
     )
     monkeypatch.setattr(barrier.BarrierJacobian, "_put", counted("puts", put))
     monkeypatch.setattr(trust_constr, "rmatvec", counted("updates", rmatvec))
+    monkeypatch.setattr(trust_constr, "fast_box_intersections", counted("boxes", fast_boxes))
+    monkeypatch.setattr(sqp, "box_intersections", counted("boxes", fast_boxes))
     ours = history(problem)
     assert min(used.values()) > 10, used  # every hook did run
     monkeypatch.setattr(trust_constr._minimize_module, "CanonicalConstraint", trust_constr.ScipyCanonical)
@@ -114,6 +119,8 @@ def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(m
             trust_constr.scipy_barrier_jacobian,
         ),
         (trust_constr._VectorFunction, "_update_hess", trust_constr.scipy_hessian_update),
+        (trust_constr._qp, "box_intersections", trust_constr.scipy_box_intersections),
+        (sqp, "box_intersections", trust_constr.scipy_box_intersections),
     ):
         monkeypatch.setattr(owner, name, scipys)
     assert history(problem) == ours
@@ -129,12 +136,14 @@ def test_every_replacement_is_in_place_on_this_scipy():
         "SQP loop",
         "barrier Jacobian",
         "quasi-Newton update",
+        "box intersections",
     )
     assert trust_constr._minimize_module.CanonicalConstraint is trust_constr.SolverCanonical
     subproblem = trust_constr._interior_point.BarrierSubproblem
     assert subproblem._compute_function is trust_constr.barrier_function
     assert subproblem._assemble_sparse_jacobian is trust_constr.barrier_jacobian
     assert trust_constr._VectorFunction._update_hess is trust_constr.hessian_update
+    assert trust_constr._qp.box_intersections is trust_constr.box_intersections
 
 
 def test_the_quasi_newton_hessian_is_scipys_sr1_and_silent_on_an_unchanged_gradient():
@@ -238,3 +247,52 @@ def test_a_structure_whose_puts_differ_from_scipys_assembly_stays_scipys(first_v
         assert barrier._identical(ours, slack_first(J_eq, J_ineq, s))
         J_eq.data, J_ineq.data = rng.normal(size=J_eq.nnz), rng.normal(size=J_ineq.nnz)
     assert assemble._places is None
+
+
+def _box_cases():
+    """Segments against a barrier subproblem's trust box (free variables, slacks bounded below
+    at -0.995) and harder boxes: directions with zeros, at a bound, NaN, ties at zero."""
+    rng = np.random.default_rng(7)
+    n = 40
+    lb = np.r_[np.full(8, -np.inf), np.full(n - 8, -0.995)]
+    ub = np.full(n, np.inf)
+    cases = {}
+    for k in range(40):
+        scale = 10.0 ** rng.uniform(-3, 1)
+        cases[f"random {k}"] = (rng.normal(size=n) * 0.1, rng.normal(size=n) * scale, lb, ub)
+    z, d = rng.normal(size=n) * 0.1, rng.normal(size=n)
+    two_sided = (-np.abs(rng.normal(size=n)) - 0.2, np.abs(rng.normal(size=n)) + 0.2)
+    cases["two-sided box"] = (z, d, *two_sided)
+    cases["start outside"] = (z + 3.0, d, *two_sided)
+    cases["missing the box"] = (np.full(n, 2.0), np.abs(d), -np.ones(n), np.ones(n))
+    still = d.copy()
+    still[::5] = 0.0
+    cases["some directions zero"] = (z, still, lb, ub)
+    cases["zero direction outside"] = (np.where(still == 0.0, -2.0, z), still, lb, ub)
+    cases["zero direction"] = (z, np.zeros(n), lb, ub)
+    at_bound = z.copy()
+    at_bound[9] = lb[9]
+    cases["starting at a bound"] = (at_bound, d, lb, ub)
+    cases["ending at a bound"] = (z, np.where(np.arange(n) == 9, lb - z, d), lb, ub)
+    signed = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    cases["zeros of both signs"] = (np.zeros(n), signed, np.full(n, -0.0), np.zeros(n))
+    cases["not a number"] = (np.where(np.arange(n) == 3, np.nan, z), d, lb, ub)
+    cases["no finite bound"] = (z, d, np.full(n, -np.inf), ub)
+    touch = np.full(n, -np.inf)
+    touch[0] = z[0] + 0.5 * d[0]
+    cases["touching the box"] = (z, d, touch, np.where(np.isinf(touch), np.inf, touch))
+    return cases
+
+
+BOX_CASES = _box_cases()
+
+
+@pytest.mark.parametrize("entire_line", [False, True])
+@pytest.mark.parametrize("case", sorted(BOX_CASES))
+def test_the_box_intersection_is_scipys_bit_for_bit(case, entire_line):
+    z, d, lb, ub = BOX_CASES[case]
+    ours = boxes.box_intersections(z, d, lb, ub, entire_line)
+    theirs = trust_constr.scipy_box_intersections(z, d, lb, ub, entire_line)
+    assert [type(x) for x in ours] == [type(x) for x in theirs]
+    assert [np.float64(x).tobytes() for x in ours[:2]] == [np.float64(x).tobytes() for x in theirs[:2]]
+    assert ours[2] is theirs[2]

@@ -24,8 +24,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.linalg import norm
 from scipy.optimize._trustregion_constr import equality_constrained_sqp as _scipy_sqp
-from scipy.optimize._trustregion_constr.qp_subproblem import box_intersections, modified_dogleg, projected_cg
+from scipy.optimize._trustregion_constr.qp_subproblem import modified_dogleg, projected_cg
 
+from .boxes import box_intersections
 from .products import rmatvec
 
 __all__ = ["equality_constrained_sqp", "MAX_CORRECTIONS", "CONTRACTION"]
