@@ -37,7 +37,7 @@ from modular_robots.cli import main
 from modular_robots.composition import Composition
 from modular_robots.exceptions import CompositionError
 from modular_robots.feasibility import check_composition
-from modular_robots.ocp import verification
+from modular_robots.ocp import trust_constr, verification
 from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem, make_candidate
 from modular_robots.ocp.shooting import NonFiniteError, ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
@@ -820,17 +820,41 @@ class _DiesSilently(ShootingSolver):
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnhandledThreadExceptionWarning")
 @pytest.mark.parametrize("solver_class", [_SlowToExit, _DiesSilently])
-def test_solve_returns_however_the_solver_thread_ends(solver_class):
+def test_iterate_returns_however_the_solver_thread_ends(solver_class):
     """A solve whose thread is still alive after posting its outcome (a hang seen in a
     95-candidate run), or that ends without one, returns instead of waiting for a message."""
     solver = solver_class(small_problem())
-    done = threading.Thread(target=solver.solve, daemon=True)
+    done = threading.Thread(target=lambda: list(solver.iterate()), daemon=True)
     done.start()
     done.join(timeout=20.0)
     assert not done.is_alive(), "solve() hangs"
     expected = "optimal" if solver_class is _SlowToExit else "failed"
     assert solver.outcome.status == expected
     assert not solver._thread.is_alive()
+
+
+def test_solve_runs_in_the_calling_thread_with_the_iterates_of_iterate():
+    """solve() has no thread to hand iterates over, and the same iterates as iterate(), bit for
+    bit; the caller's thread is a solver's only while it solves, also when the solve fails."""
+    problem = small_problem()
+    threaded = ShootingSolver(problem)
+    iterates = list(threaded.iterate())
+    direct = ShootingSolver(problem)
+    outcome = direct.solve()
+    assert direct._thread is None and not trust_constr.in_solver_thread()
+    assert (outcome.status, outcome.iterations) == (threaded.outcome.status, threaded.outcome.iterations)
+    assert outcome.final.y.tobytes() == iterates[-1].y.tobytes() == threaded.outcome.final.y.tobytes()
+    assert outcome.final == direct.last and outcome.seconds > 0.0
+    assert direct.solve() is outcome and list(direct.iterate()) == []  # it ran once
+
+    class Breaks(ShootingSolver):
+        def _minimize(self):
+            assert trust_constr.in_solver_thread()
+            raise FloatingPointError("a model that cannot be evaluated")
+
+    failed = Breaks(problem).solve()
+    assert (failed.status, failed.reason) == ("failed", "FloatingPointError: a model that cannot be evaluated")
+    assert not trust_constr.in_solver_thread()
 
 
 def test_iteration_limit_fails_without_raising():
@@ -877,7 +901,10 @@ def test_evaluation_error_fails_with_its_reason():
     outcome = solver.solve()
     assert outcome.status == "failed"
     assert "NonFiniteError" in outcome.reason and "blew up (test)" in outcome.reason
-    assert not solver._thread.is_alive()
+    calls["n"] = 0  # the same from the solver's thread, which then ends
+    threaded = ShootingSolver(problem)
+    list(threaded.iterate())
+    assert threaded.outcome.reason == outcome.reason and not threaded._thread.is_alive()
     # a Candidate reports it the same way
     result = Candidate(problem).solve()
     assert result.status == "failed" and "blew up (test)" in result.reason

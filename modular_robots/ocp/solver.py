@@ -4,15 +4,16 @@ a time (SPEC §6).
 ``trust-constr`` owns its loop, so it runs in a helper thread that hands control back after every
 iteration: :meth:`ShootingSolver.iterate` is a generator that yields an :class:`Iterate` per
 solver iteration, :meth:`ShootingSolver.close` stops the solver cleanly (its callback raises
-``StopIteration``) and joins the thread, and :meth:`ShootingSolver.solve` runs to the end. Only
-one of the two threads runs at any moment, so the problem's Pinocchio data is never shared.
+``StopIteration``) and joins the thread. Only one of the two threads runs at any moment, so the
+problem's Pinocchio data is never shared. :meth:`ShootingSolver.solve` runs to the end in the
+calling thread, without the hand-over per iteration.
 A solver failure never raises into the caller: the generator ends and :attr:`outcome` says why.
 
-Its thread is marked for :mod:`~modular_robots.ocp.trust_constr`, which takes over six parts
-of trust-constr there: its projections, canonical constraints and barrier Jacobian, computed from
-the problem's structure, its barrier function, vectorised, the quasi-Newton update's transposed
-products, and its SQP loop, which repeats a refused step's second-order correction
-(:mod:`~modular_robots.ocp.sqp`).
+The thread that runs trust-constr is marked for :mod:`~modular_robots.ocp.trust_constr`, which
+takes over seven parts of trust-constr there: its projections, canonical constraints and barrier
+Jacobian, computed from the problem's structure, its barrier function and box intersections,
+vectorised, the quasi-Newton update's transposed products, and its SQP loop, which repeats a
+refused step's second-order correction (:mod:`~modular_robots.ocp.sqp`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from scipy import sparse
 from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
 
 from .shooting import ShootingProblem
-from .trust_constr import mark_solver_thread
+from .trust_constr import solver_thread
 
 __all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS"]
 
@@ -151,6 +152,7 @@ class ShootingSolver:
         self._to_caller: queue.Queue = queue.Queue()
         self._resume = threading.Semaphore(0)
         self._stop = False
+        self._direct = False
         self._seconds = 0.0
 
     # -- public ------------------------------------------------------------------------------
@@ -187,9 +189,17 @@ class ShootingSolver:
         self._shutdown()
 
     def solve(self) -> SolverOutcome:
-        """Run to the end and return the :class:`SolverOutcome`."""
-        for _ in self.iterate():
-            pass
+        """Run to the end in the calling thread and return the :class:`SolverOutcome`: the
+        iterates of :meth:`iterate`, without a thread handing each one over (on the OCP
+        benchmark's candidates that hand-over cost about 5 % of a solve). Once it has ended (or
+        was closed), the same outcome."""
+        if self._thread is None and self.outcome is not None:
+            return self.outcome
+        if self._started:
+            raise RuntimeError("a ShootingSolver iterates once; create a new one to solve again")
+        self._started = self._direct = True
+        self._run()
+        self.outcome = self._to_caller.get_nowait()
         return self.outcome
 
     # -- internals ---------------------------------------------------------------------------
@@ -241,6 +251,10 @@ class ShootingSolver:
             float(state.optimality),
             cost_bound=problem.cost_bound,
         )
+        if self._direct:
+            self.last = iterate
+            self._clock = time.perf_counter()
+            return False
         self._to_caller.put(iterate)
         self._resume.acquire()
         self._clock = time.perf_counter()
@@ -251,9 +265,9 @@ class ShootingSolver:
     def _run(self) -> None:
         problem = self.problem
         self._clock = time.perf_counter()
-        mark_solver_thread(problem.n_variables)
         try:
-            result = self._minimize()
+            with solver_thread(problem.n_variables):
+                result = self._minimize()
         except Exception as exc:
             logger.debug("solver for %s failed", problem.robot.name, exc_info=True)
             self._finish("failed", f"{type(exc).__name__}: {exc}")

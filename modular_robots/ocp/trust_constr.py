@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 from scipy import sparse
@@ -59,7 +61,7 @@ try:  # a copy of SciPy's loop that calls into its private modules: without them
 except ImportError:  # pragma: no cover
     sqp = None
 
-__all__ = ["INSTALLED", "mark_solver_thread", "in_solver_thread"]
+__all__ = ["INSTALLED", "mark_solver_thread", "solver_thread", "in_solver_thread"]
 
 logger = logging.getLogger(__name__)
 
@@ -69,6 +71,18 @@ _solver_thread = threading.local()
 def mark_solver_thread(n_variables: int) -> None:
     """Mark the calling thread as a solver's, for a problem of ``n_variables`` variables."""
     _solver_thread.n_variables = n_variables
+
+
+@contextmanager
+def solver_thread(n_variables: int) -> Iterator[None]:
+    """Mark the calling thread as a solver's (:func:`mark_solver_thread`) for the ``with`` block,
+    and give it back its previous mark after."""
+    previous = getattr(_solver_thread, "n_variables", None)
+    _solver_thread.n_variables = n_variables
+    try:
+        yield
+    finally:
+        _solver_thread.n_variables = previous
 
 
 def in_solver_thread() -> bool:
