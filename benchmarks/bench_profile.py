@@ -2,7 +2,8 @@
 end, its own time grouped by who does the work (trust-constr's projections, FCL, the project's
 evaluation, the rest of SciPy/NumPy; SuperLU where a commit before a293e21 is profiled). The
 project's replacements of parts of trust-constr's own loop (``ocp.sqp``, ``ocp.trust_constr`` and
-the bit-identical ones it installs, but the projections) count with trust-constr.
+the bit-identical ones it installs, but the projections and their sparse products) count with
+trust-constr.
 Pinocchio's functions are not Python functions that cProfile sees: their time counts in the
 project's evaluation that calls them. The full profile is written beside the JSON as
 ``profile.prof`` (not committed; open it with ``python -m pstats`` or snakeviz for a flame view).
@@ -29,18 +30,19 @@ COMPOSITION = "B-J1-L2-J1-L1-J2-L2-J1-L1-E2"
 
 
 #: The project's modules that stand in for parts of trust-constr's loop (the projections aside).
-_TRUST_CONSTR_PARTS = ("sqp.py", "trust_constr.py", "canonical.py", "barrier.py", "products.py", "boxes.py")
+_TRUST_CONSTR_PARTS = ("sqp.py", "trust_constr.py", "canonical.py", "barrier.py", "boxes.py")
 
 
 def _group(key: tuple[str, int, str]) -> str:
     filename, _, name = key
-    if "modular_robots/ocp/" in filename and filename.rsplit("/", 1)[-1] in _TRUST_CONSTR_PARTS:
+    module = filename.rsplit("/", 1)[-1] if "modular_robots/ocp/" in filename else ""
+    if module in _TRUST_CONSTR_PARTS or (module == "products.py" and name == "rmatvec"):  # MatVec: projections
         return "SciPy trust-constr, NumPy and the rest"
     if "gstrf" in name:
         return "SuperLU factorisation (trust-constr's augmented system)"
     if "'solve' of 'SuperLU'" in name:
         return "SuperLU solves"
-    if filename.endswith("modular_robots/ocp/projections.py") or filename.endswith("linalg/_decomp_lu.py"):
+    if module in ("projections.py", "products.py") or filename.endswith("linalg/_decomp_lu.py"):
         return "projections from the barrier structure (modular_robots.ocp.projections, LAPACK)"
     if "fcl" in name or "fcl" in filename or filename.endswith("modular_robots/collision.py"):
         return "FCL and clearance"

@@ -857,6 +857,58 @@ def test_solve_runs_in_the_calling_thread_with_the_iterates_of_iterate():
     assert not trust_constr.in_solver_thread()
 
 
+class _Interrupted(ShootingSolver):
+    """Ctrl-C in the fourth iteration's evaluation."""
+
+    def _minimize(self):
+        evaluate, calls = self.problem.evaluate, []
+
+        def interrupted(y, derivatives=True):
+            calls.append(1)
+            if self.last is not None and self.last.iteration == 3:
+                raise KeyboardInterrupt
+            return evaluate(y, derivatives)
+
+        self.problem.evaluate = interrupted
+        try:
+            return super()._minimize()
+        finally:
+            self.problem.evaluate = evaluate
+
+
+class _FinishFails(ShootingSolver):
+    def _finish(self, *args, **kwargs):
+        raise ValueError("bookkeeping after trust-constr (test)")
+
+
+class _ClosesItself(ShootingSolver):
+    def _callback(self, intermediate_result):
+        if intermediate_result.nit == 2:
+            self.close()
+        return super()._callback(intermediate_result)
+
+
+def test_solve_ends_with_an_outcome_however_it_is_left():
+    """Ctrl-C reaches the caller and leaves a stopped outcome with the last iterate (close()
+    keeps it); a failure after trust-constr returns a failed outcome instead of raising; close()
+    during a solve stops it at the next iteration. The caller's thread is unmarked each time."""
+    interrupted = _Interrupted(small_problem())
+    with pytest.raises(KeyboardInterrupt):
+        interrupted.solve()
+    assert (interrupted.outcome.status, interrupted.outcome.reason) == ("stopped", "interrupted (KeyboardInterrupt)")
+    assert interrupted.outcome.iterations == 3 and interrupted.outcome.final.iteration == 3
+    interrupted.close()
+    assert interrupted.outcome.reason == "interrupted (KeyboardInterrupt)"
+    assert not trust_constr.in_solver_thread()
+
+    failed = _FinishFails(small_problem()).solve()
+    assert (failed.status, failed.reason) == ("failed", "ValueError: bookkeeping after trust-constr (test)")
+    assert failed.iterations > 3 and not trust_constr.in_solver_thread()
+
+    closed = _ClosesItself(small_problem()).solve()
+    assert (closed.status, closed.reason, closed.iterations) == ("stopped", "closed by the caller", 2)
+
+
 def test_iteration_limit_fails_without_raising():
     outcome = ShootingSolver(small_problem(), max_iterations=2).solve()
     assert outcome.status == "failed"

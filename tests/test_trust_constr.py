@@ -296,3 +296,17 @@ def test_the_box_intersection_is_scipys_bit_for_bit(case, entire_line):
     assert [type(x) for x in ours] == [type(x) for x in theirs]
     assert [np.float64(x).tobytes() for x in ours[:2]] == [np.float64(x).tobytes() for x in theirs[:2]]
     assert ours[2] is theirs[2]
+
+
+@pytest.mark.parametrize(
+    "lb, ub",
+    [(-1.0, np.inf), (np.full(3, -1.0), np.full(4, np.inf))],
+    ids=["scalar bounds", "lengths that differ"],
+)
+def test_a_box_of_another_shape_is_scipys_to_judge(lb, ub):
+    """SciPy's masks raise on bounds that are not the step's shape; so does the fast path."""
+    z, d = np.zeros(4), np.array([1.0, -2.0, 0.5, 3.0])
+    with pytest.raises(IndexError):
+        trust_constr.scipy_box_intersections(z, d, lb, ub)
+    with pytest.raises(IndexError):
+        boxes.box_intersections(z, d, lb, ub)

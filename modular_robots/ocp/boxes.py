@@ -11,7 +11,7 @@ region, and by the second-order correction; about two calls per iteration in all
 largest of a set of floats is the same float whichever way it is found, so the result is SciPy's
 bit for bit; the two cases where the two reductions may differ (a not-a-number,
 which the built-ins skip or keep depending on its position, and a tie between ``0.0`` and
-``-0.0``) are left to SciPy's function.
+``-0.0``) are left to SciPy's function, as are arrays of different shapes.
 """
 
 from __future__ import annotations
@@ -31,6 +31,8 @@ def box_intersections(z, d, lb, ub, entire_line=False):
     segment ``z + t d`` (``0 <= t <= 1``; any ``t`` if ``entire_line``) inside the box
     ``lb <= x <= ub`` for ``ta <= t <= tb``."""
     z, d, lb, ub = np.asarray(z), np.asarray(d), np.asarray(lb), np.asarray(ub)
+    if not z.shape == d.shape == lb.shape == ub.shape:  # SciPy's masks raise on what would broadcast here
+        return scipy_box_intersections(z, d, lb, ub, entire_line)
     if norm(d) == 0:
         return 0, 0, False
     moving = d != 0

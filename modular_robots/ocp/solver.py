@@ -180,7 +180,12 @@ class ShootingSolver:
             self._shutdown()
 
     def close(self) -> None:
-        """Stop the solver (if running) and free its thread; :attr:`outcome` becomes ``stopped``."""
+        """Stop the solver (if running) and free its thread; :attr:`outcome` becomes ``stopped``.
+        A :meth:`solve` running (in another thread, or calling this from a callback) stops at its
+        next iteration and returns that outcome."""
+        if self._direct:
+            self._stop = self.outcome is None
+            return
         if self._thread is None:
             self._started = True
             if self.outcome is None:
@@ -198,8 +203,17 @@ class ShootingSolver:
         if self._started:
             raise RuntimeError("a ShootingSolver iterates once; create a new one to solve again")
         self._started = self._direct = True
-        self._run()
-        self.outcome = self._to_caller.get_nowait()
+        try:
+            self._run()
+        except Exception as exc:  # outside trust-constr's loop, whose own failures are outcomes
+            logger.debug("solver for %s failed", self.problem.robot.name, exc_info=True)
+            self.outcome = self._posted() or self._outcome_without_result("failed", f"{type(exc).__name__}: {exc}")
+            return self.outcome
+        except BaseException as exc:  # Ctrl-C, SystemExit: raised to the caller, the solver stopped
+            reason = f"interrupted ({type(exc).__name__})"
+            self.outcome = self._posted() or self._outcome_without_result("stopped", reason)
+            raise
+        self.outcome = self._posted() or self._outcome_without_result("failed", "the solver ended without an outcome")
         return self.outcome
 
     # -- internals ---------------------------------------------------------------------------
@@ -228,13 +242,19 @@ class ShootingSolver:
                 return self._to_caller.get(timeout=1.0)
             except queue.Empty:
                 if not self._thread.is_alive() and self._to_caller.empty():
-                    return SolverOutcome(
-                        "failed",
-                        "the solver thread ended without an outcome",
-                        self.last.iteration - self.iteration_offset if self.last else 0,
-                        self._seconds,
-                        self.last,
-                    )
+                    return self._outcome_without_result("failed", "the solver thread ended without an outcome")
+
+    def _posted(self) -> SolverOutcome | None:
+        """The outcome the solver posted, if it did (a direct solve posts nothing else)."""
+        try:
+            return self._to_caller.get_nowait()
+        except queue.Empty:
+            return None
+
+    def _outcome_without_result(self, status: str, reason: str) -> SolverOutcome:
+        """An outcome from the last iterate, for a solve that ended without posting one."""
+        last = self.last
+        return SolverOutcome(status, reason, last.iteration - self.iteration_offset if last else 0, self._seconds, last)
 
     def _callback(self, intermediate_result) -> bool:
         state = intermediate_result  # scipy passes the new-style result only under this name
@@ -253,10 +273,9 @@ class ShootingSolver:
         )
         if self._direct:
             self.last = iterate
-            self._clock = time.perf_counter()
-            return False
-        self._to_caller.put(iterate)
-        self._resume.acquire()
+        else:
+            self._to_caller.put(iterate)
+            self._resume.acquire()
         self._clock = time.perf_counter()
         if self._stop:
             raise StopIteration
