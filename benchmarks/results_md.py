@@ -212,7 +212,9 @@ def _profile_lines() -> list[str]:
     lines = [
         "## Where one solve spends its time (cProfile)",
         "",
-        f"One solve of {after['composition']} from the default start (`benchmarks/bench_profile.py`), own "
+        f"One solve of {after['composition']} from the default start (`benchmarks/bench_profile.py`"
+        + (f"; the fastest of {after['runs']}" if after.get("runs", 1) > 1 else "")
+        + "), own "
         "time grouped by who does the work"
         + (", on an earlier commit and on the current one" if before else "")
         + ". cProfile adds a cost per Python call; wall times depend on the machine's load.",
