@@ -37,7 +37,6 @@ from scipy import sparse
 from scipy.optimize import HessianUpdateStrategy
 
 from .barrier import BarrierJacobian
-from .boxes import box_intersections as fast_box_intersections
 from .products import rmatvec
 from .projections import barrier_projections
 
@@ -60,6 +59,10 @@ try:  # a copy of SciPy's loop that calls into its private modules: without them
     from . import sqp
 except ImportError:  # pragma: no cover
     sqp = None
+try:  # reads SciPy's own box_intersections from its private module: without it, SciPy's stays
+    from .boxes import box_intersections as fast_box_intersections
+except ImportError:  # pragma: no cover
+    _qp = None
 
 __all__ = ["INSTALLED", "mark_solver_thread", "solver_thread", "in_solver_thread"]
 
