@@ -196,7 +196,7 @@ class ShootingSolver:
     def solve(self) -> SolverOutcome:
         """Run to the end in the calling thread and return the :class:`SolverOutcome`: the
         iterates of :meth:`iterate`, without a thread handing each one over (on the OCP
-        benchmark's candidates that hand-over cost about 5 % of a solve). Once it has ended (or
+        benchmark's candidates that hand-over costs 1-3 % of a solve). Once it has ended (or
         was closed), the same outcome."""
         if self._thread is None and self.outcome is not None:
             return self.outcome
