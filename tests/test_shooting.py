@@ -827,7 +827,7 @@ def test_iterate_returns_however_the_solver_thread_ends(solver_class):
     done = threading.Thread(target=lambda: list(solver.iterate()), daemon=True)
     done.start()
     done.join(timeout=20.0)
-    assert not done.is_alive(), "solve() hangs"
+    assert not done.is_alive(), "iterate() hangs"
     expected = "optimal" if solver_class is _SlowToExit else "failed"
     assert solver.outcome.status == expected
     assert not solver._thread.is_alive()
@@ -861,10 +861,9 @@ class _Interrupted(ShootingSolver):
     """Ctrl-C in the fourth iteration's evaluation."""
 
     def _minimize(self):
-        evaluate, calls = self.problem.evaluate, []
+        evaluate = self.problem.evaluate
 
         def interrupted(y, derivatives=True):
-            calls.append(1)
             if self.last is not None and self.last.iteration == 3:
                 raise KeyboardInterrupt
             return evaluate(y, derivatives)
