@@ -59,6 +59,7 @@ __all__ = [
     "composition_space",
     "estimate_seconds",
     "MAX_COMPOSITIONS",
+    "NEAREST_MISS",
 ]
 
 
@@ -225,7 +226,7 @@ def _collision_check(collision: CollisionModel, q: np.ndarray, label: str) -> _C
     i, j = np.unravel_index(int(np.argmin(distances.distance)), distances.distance.shape)
     clearance = float(distances.distance[i, j])
     name = collision.robot.primitives[i].name
-    message = f"collision: {name} {-clearance:.3g} m inside obstacle {collision.given_index[j] + 1} ({label})"
+    message = f"collision: {name} {-clearance:.3g} m inside task.obstacles[{collision.given_index[j]}] ({label})"
     return _Check(clearance > 0.0, clearance, message)
 
 
@@ -407,7 +408,9 @@ def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
     # the composition needs at least its best ratio at every target seen so far
     figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
     if not outcome.kept:
-        tests_passed, _, message = outcome.closest
+        tests_passed, figure, message = outcome.closest
+        if tests_passed:
+            figures["clearance"] = figure  # of the configuration nearest to clearing the obstacles
         cascade.fail((STATIC_TORQUE if tests_passed == 0 else COLLISION).name, message)
         return
     cascade.passing[label] = outcome.kept
@@ -574,6 +577,17 @@ def filter_compositions(
     yield from engine.map_chunks(_check_chunk, context, compositions, chunksize=16)
 
 
+#: Per test, the figure by which a removed composition's nearness to passing is judged, ``1`` if
+#: smaller is nearer (``-1`` if larger is), and the diagnosis line's words for the nearest.
+NEAREST_MISS = {
+    REACH.name: ("reach_margin", -1, "largest reach margin found: {:.3g} m"),
+    WORKSPACE.name: ("workspace_excess", 1, "smallest distance to a workspace box: {:.3g} m"),
+    INVERSE_KINEMATICS.name: ("ik_error", 1, "smallest IK error: {:.3g} m"),
+    STATIC_TORQUE.name: ("torque_ratio", 1, "best torque ratio found: {:.2f} x the limit"),
+    COLLISION.name: ("clearance", -1, "largest clearance found: {:.3g} m"),
+}
+
+
 @dataclass
 class FeasibilitySummary:
     """Counts, CPU seconds per test and the closest misses of a stream of verdicts.
@@ -592,13 +606,15 @@ class FeasibilitySummary:
     feasible: int = 0
     removed: dict[str, int] = field(default_factory=lambda: {t: 0 for t in TEST_NAMES})
     seconds: dict[str, float] = field(default_factory=lambda: {t: 0.0 for t in ("model",) + TEST_NAMES})
-    best_torque_ratio: float = math.inf
-    best_torque_miss: str = ""
-    smallest_ik_error: float = math.inf
-    smallest_ik_miss: str = ""
-    smallest_workspace_excess: float = math.inf
-    smallest_workspace_miss: str = ""
+    #: Per test, the figure of the removed composition that came nearest to passing it and
+    #: ``"name: message"`` of that composition (see :data:`NEAREST_MISS`).
+    nearest_misses: dict[str, tuple[float, str]] = field(default_factory=dict)
     _kept: list = field(default_factory=list, init=False, repr=False)
+
+    @property
+    def best_torque_ratio(self) -> float:
+        """The smallest static torque ratio of a composition the static torque test removed."""
+        return self.nearest_misses.get(STATIC_TORQUE.name, (math.inf, ""))[0]
 
     @property
     def survivors(self) -> list[Verdict]:
@@ -620,17 +636,13 @@ class FeasibilitySummary:
                 entry = (-verdict.time_bound, -self.feasible, verdict)
                 (heapq.heappush if len(self._kept) < self.keep else heapq.heappushpop)(self._kept, entry)
             return
-        self.removed[verdict.failed_test] += 1
-        figure = verdict.figures
-        if verdict.failed_test == STATIC_TORQUE.name and figure["torque_ratio"] < self.best_torque_ratio:
-            self.best_torque_ratio = figure["torque_ratio"]
-            self.best_torque_miss = f"{verdict.composition.name}: {verdict.message}"
-        if verdict.failed_test == INVERSE_KINEMATICS.name and figure["ik_error"] < self.smallest_ik_error:
-            self.smallest_ik_error = figure["ik_error"]
-            self.smallest_ik_miss = f"{verdict.composition.name}: {verdict.message}"
-        if verdict.failed_test == WORKSPACE.name and figure["workspace_excess"] < self.smallest_workspace_excess:
-            self.smallest_workspace_excess = figure["workspace_excess"]
-            self.smallest_workspace_miss = f"{verdict.composition.name}: {verdict.message}"
+        test = verdict.failed_test
+        self.removed[test] += 1
+        key, sign, _ = NEAREST_MISS[test]
+        value = verdict.figures.get(key)
+        nearest = self.nearest_misses.get(test)
+        if value is not None and (nearest is None or sign * value < sign * nearest[0]):
+            self.nearest_misses[test] = (value, f"{verdict.composition.name}: {verdict.message}")
 
     def counts(self) -> dict:
         """The step-B block of ``result.json``'s ``counts``."""
@@ -658,13 +670,8 @@ class FeasibilitySummary:
         lines = [
             f"no composition is feasible: the last {self.removed[last]} candidate(s) were removed by the {last} test"
         ]
-        if math.isfinite(self.best_torque_ratio):
-            lines.append(f"best torque ratio found: {self.best_torque_ratio:.2f} x the limit ({self.best_torque_miss})")
-        if math.isfinite(self.smallest_ik_error):
-            lines.append(f"smallest IK error: {self.smallest_ik_error:.3g} m ({self.smallest_ik_miss})")
-        if math.isfinite(self.smallest_workspace_excess):
-            lines.append(
-                f"smallest distance to a workspace box: {self.smallest_workspace_excess:.3g} m "
-                f"({self.smallest_workspace_miss})"
-            )
+        for test in reversed(TEST_NAMES):  # the later a test, the nearer its removed came to passing
+            if test in self.nearest_misses:
+                value, miss = self.nearest_misses[test]
+                lines.append(f"{NEAREST_MISS[test][2].format(value)} ({miss})")
         return "\n".join(lines)

@@ -162,7 +162,7 @@ def panel(document: dict) -> str:
             (
                 "closest approach",
                 f"{approach['clearance'] * 1000:.1f} mm at t = {approach['t']:.3f} s, "
-                f"{approach['primitive']} to obstacle {approach['obstacle'] + 1}",
+                f"{approach['primitive']} to task.obstacles[{approach['obstacle']}]",
             )
         )
     verification = w.get("verification") or {}

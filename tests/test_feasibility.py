@@ -163,7 +163,7 @@ def test_pose_forced_through_an_obstacle(paper_catalog):
     blocking = SphereObstacle((0.35, 0.0, 0.6), 0.3)  # 0.35 - 0.1 - 0.3 = -0.05: overlaps L2
     verdict = _check(paper_catalog, "B-J1-L2-E1", _task((0.0, 0.0, 1.2), obstacles=[blocking]))
     assert verdict.failed_test == "collision"
-    assert verdict.message == "collision: m2_L2_capsule 0.05 m inside obstacle 1 (start)"
+    assert verdict.message == "collision: m2_L2_capsule 0.05 m inside task.obstacles[0] (start)"
     clear = SphereObstacle((0.45, 0.0, 0.6), 0.3)
     passed = _check(paper_catalog, "B-J1-L2-E1", _task((0.0, 0.0, 1.2), obstacles=[clear]))
     assert passed.passed and passed.figures["clearance"] == pytest.approx(0.05, abs=1e-9)
@@ -224,6 +224,23 @@ def test_a_diagnosis_names_the_closest_workspace_miss(paper_catalog):
         "smallest distance to a workspace box: 0.1 m (B-J2-L2-E2: workspace: the start is 0.1 m outside the box "
         "that holds every tool position within the joint limits (x [0.000, 0.000], y [0.000, 0.000], "
         "z [1.200, 1.500] m))",
+    ]
+
+
+def test_a_diagnosis_names_the_nearest_collision_and_reach_misses(paper_catalog):
+    """The nearest miss of each test that removed compositions, the last test's first: the least
+    penetration of an obstacle, then the largest (negative) reach margin."""
+    summary = FeasibilitySummary()
+    for x in (0.35, 0.38, 0.36):  # L2 (radius 0.1) 0.05, 0.02 and 0.04 m inside the sphere
+        summary.add(
+            _check(paper_catalog, "B-J1-L2-E1", _task((0.0, 0.0, 1.2), obstacles=[SphereObstacle((x, 0.0, 0.6), 0.3)]))
+        )
+    summary.add(_check(paper_catalog, "B-J1-L2-E1", _task((0.0, 0.0, 3.0))))
+    assert summary.diagnosis().splitlines() == [
+        "no composition is feasible: the last 3 candidate(s) were removed by the collision test",
+        "largest clearance found: -0.02 m (B-J1-L2-E1: collision: m2_L2_capsule 0.02 m inside task.obstacles[0] (start))",
+        "largest reach margin found: -1.8 m (B-J1-L2-E1: reach: the start is 3.000 m from the base, the arm reaches "
+        "at most 1.200 m)",
     ]
 
 
