@@ -61,10 +61,27 @@ def run_table(result, scenario) -> str:
             f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed",
         ),
         ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),
+        *_unconverged_row(result, scenario),
         ("wall time [s]", ", ".join(f"{k} {s:.1f}" for k, s in result.seconds.items())),
     ]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {value}" for k, value in rows)
+
+
+def _unconverged_row(result, scenario) -> list[tuple[str, str]]:
+    settings = scenario.optimizer
+    below = result.unconverged_below_winner(settings.constraint_tolerance)
+    if not below:
+        return []
+    best = below[0]
+    return [
+        (
+            "not converged",
+            f"{len(below)} failed at the iteration limit feasible at their nodes with a lower cost than "
+            f"the winner's (best {best.name}, {best.cost:.4g}); unranked; a higher optimizer.max_iterations "
+            f"(now {settings.max_iterations}) may let them converge",
+        )
+    ]
 
 
 class LiveLine:

@@ -70,6 +70,21 @@ class RunResult:
     def iterations(self) -> int:
         return sum(c.iterations for c in self.candidates)
 
+    def unconverged_below_winner(self, constraint_tolerance: float) -> tuple[CandidateResult, ...]:
+        """The candidates that failed at the iteration limit with a plan feasible at its nodes
+        (scaled constraint violation at most ``constraint_tolerance``) and a cost below the
+        winner's, lowest cost first. Only converged candidates are ranked (SPEC §2), so none of
+        these can win; a higher iteration limit might let one converge below the winner."""
+        below = (
+            c
+            for c in self.candidates
+            if c.status == CandidateStatus.FAILED
+            and c.reason.startswith("iteration limit")
+            and c.constraint_violation <= constraint_tolerance
+            and c.cost < self.winner.cost
+        )
+        return tuple(sorted(below, key=lambda c: c.cost))
+
 
 def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
     """Every step-C candidate of step B's survivors: one per boundary pair a verdict offers (the
@@ -97,10 +112,14 @@ def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
 
 
 def _status_counts(results: Iterable[CandidateResult]) -> dict[str, int]:
+    """Candidates per status; ``stopped`` (closed when a run is interrupted) only if any is."""
     statuses = [r.status for r in results]
-    return {
+    counts = {
         str(s): statuses.count(s) for s in (CandidateStatus.PRUNED, CandidateStatus.FAILED, CandidateStatus.OPTIMAL)
     }
+    if CandidateStatus.STOPPED in statuses:
+        counts[str(CandidateStatus.STOPPED)] = statuses.count(CandidateStatus.STOPPED)
+    return counts
 
 
 def run_scenario(

@@ -83,3 +83,47 @@ def test_optimize_writes_a_motion_from_start_to_goal(tmp_path):
         assert np.linalg.norm([float(row[k]) - t for k, t in zip("xyz", target)]) < 0.01
         assert all(abs(float(row[f"qd{i}"])) < 1e-6 for i in range(1, nv + 1))
     assert float(first["t"]) == 0.0 and float(last["t"]) == pytest.approx(doc["winner"]["tf"], rel=1e-9)
+
+
+def test_run_table_names_unconverged_candidates_below_the_winner():
+    """A candidate that stopped at the iteration limit feasible and below the winner's cost is
+    not ranked (SPEC §2), but the summary says so; an infeasible or costlier one is not named."""
+    from modular_robots.cli_output import run_table
+    from modular_robots.feasibility import FeasibilitySummary
+    from modular_robots.ocp.candidate import CandidateResult
+    from modular_robots.ocp.verification import Verification
+    from modular_robots.pipeline import RunResult
+
+    scenario = load_scenario(PAPER_SCENARIO)
+    verification = Verification(1e-5, 0.0, 0.0, 0.1, 0.0, 0.5, 0.5, 100, 4)
+    winner = CandidateResult(
+        name="W", dof=5, status="optimal", reason="converged", cost=0.6, tf=2.5, verification=verification, substeps=4
+    )
+    limit = "iteration limit (300) reached, constraint violation {}"
+    candidates = (
+        winner,
+        CandidateResult(
+            name="A", dof=5, status="failed", reason=limit.format("1e-08"), cost=0.59, constraint_violation=1e-8
+        ),
+        CandidateResult(
+            name="B", dof=5, status="failed", reason=limit.format("1e-10"), cost=0.55, constraint_violation=1e-10
+        ),
+        CandidateResult(
+            name="C", dof=5, status="failed", reason=limit.format("0.01"), cost=0.4, constraint_violation=0.01
+        ),
+        CandidateResult(
+            name="D", dof=5, status="failed", reason=limit.format("1e-09"), cost=0.7, constraint_violation=1e-9
+        ),
+        CandidateResult(
+            name="E", dof=5, status="failed", reason="verification failed", cost=0.3, constraint_violation=0.0
+        ),
+    )
+    result = RunResult(candidates, winner, FeasibilitySummary(), 10, {"optimization": 1.0})
+    assert [c.name for c in result.unconverged_below_winner(1e-6)] == ["B", "A"]
+    assert (
+        "not converged         2 failed at the iteration limit feasible at their nodes with a lower cost "
+        "than the winner's (best B, 0.55); unranked; a higher optimizer.max_iterations (now 300) may let "
+        "them converge"
+    ) in run_table(result, scenario)
+    alone = RunResult((winner, candidates[3], candidates[4]), winner, FeasibilitySummary(), 10, {})
+    assert "not converged" not in run_table(alone, scenario)

@@ -1104,6 +1104,9 @@ def test_small_interrupted_run_leaves_a_partial_folder(small_scenario, tmp_path,
     for c in doc["candidates"]:
         assert c["status"] in ("stopped", "pruned", "optimal", "failed")
         assert c["iterations"] <= 3 and len(c["cost_history"]) == c["iterations"]
+    statuses = [c["status"] for c in doc["candidates"]]
+    assert "stopped" in statuses
+    assert {s: doc["counts"].get(s, 0) for s in set(statuses)} == {s: statuses.count(s) for s in set(statuses)}
     assert not (tmp_path / "winner.urdf").exists()
     deadline = time.monotonic() + 5
     while multiprocessing.active_children() and time.monotonic() < deadline:
