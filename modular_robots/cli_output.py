@@ -4,6 +4,7 @@ JSON."""
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -22,6 +23,10 @@ __all__ = [
     "survivor_table",
     "written_files",
 ]
+
+#: What the summary says for the clearance when no obstacle is within reach of the robot (or the
+#: task has none), where the figure is infinite.
+_NO_OBSTACLE = "no obstacle within reach"
 
 #: Survivors ``filter`` prints (the smallest time bounds); without ``--out`` it holds no more.
 SURVIVOR_ROWS = 25
@@ -49,8 +54,9 @@ def run_table(result, scenario) -> str:
         (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
         (
             "verification",
-            f"terminal error {v.terminal_error * 1000:.3f} mm, min clearance "
-            f"{v.min_clearance:.4f} m, {w.substeps} sub-steps",
+            f"terminal error {v.terminal_error * 1000:.3f} mm, "
+            + (f"min clearance {v.min_clearance:.4f} m" if math.isfinite(v.min_clearance) else _NO_OBSTACLE)
+            + f", {w.substeps} sub-steps",
         ),
         ("compositions", f"{result.feasibility.checked} enumerated, {result.feasibility.feasible} feasible"),
         (
@@ -128,11 +134,15 @@ def survivor_table(summary: FeasibilitySummary, limit: int = SURVIVOR_ROWS) -> s
     for v in ranked[:limit]:
         lines.append(
             f"{v.composition.name:<34} {v.composition.dof:>3} {v.time_bound:>12.3f} "
-            f"{v.figures['torque_ratio']:>12.3f} {v.figures['clearance']:>11.3f}"
+            f"{v.figures['torque_ratio']:>12.3f} {_clearance_cell(v.figures['clearance']):>11}"
         )
     if summary.feasible > limit:
         lines.append(f"... and {summary.feasible - limit} more (see --out)")
     return "\n".join(lines)
+
+
+def _clearance_cell(clearance: float) -> str:
+    return f"{clearance:.3f}" if math.isfinite(clearance) else "-"
 
 
 def feasibility_json(scenario, settings, summary, wall, jobs) -> dict:

@@ -112,14 +112,10 @@ def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
 
 
 def _status_counts(results: Iterable[CandidateResult]) -> dict[str, int]:
-    """Candidates per status; ``stopped`` (closed when a run is interrupted) only if any is."""
+    """Candidates per status; ``stopped``: not started or closed before they ended (0 at the end
+    of a run that was not interrupted)."""
     statuses = [r.status for r in results]
-    counts = {
-        str(s): statuses.count(s) for s in (CandidateStatus.PRUNED, CandidateStatus.FAILED, CandidateStatus.OPTIMAL)
-    }
-    if CandidateStatus.STOPPED in statuses:
-        counts[str(CandidateStatus.STOPPED)] = statuses.count(CandidateStatus.STOPPED)
-    return counts
+    return {str(s): statuses.count(s) for s in CandidateStatus}
 
 
 def run_scenario(
@@ -268,13 +264,17 @@ def optimize_composition(
     candidates = [make_candidate(scenario, spec) for spec in specs]
     with RunRecorder(out, scenario, rule="single composition") as recorder:
         recorder.update(
-            counts={"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates), "pruned": 0},
+            counts={"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates)},
             seconds={"feasibility": time.perf_counter() - start},
         )
 
         def record() -> list[CandidateResult]:
             results = [c.result for c in candidates if c.result is not None]
-            recorder.update(results=results, seconds={"optimization": sum(c.seconds for c in candidates)})
+            recorder.update(
+                counts=_status_counts(results),
+                results=results,
+                seconds={"optimization": sum(c.seconds for c in candidates)},
+            )
             return results
 
         try:

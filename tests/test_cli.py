@@ -72,6 +72,10 @@ def test_optimize_writes_a_motion_from_start_to_goal(tmp_path):
     doc = json.loads((out / "result.json").read_text())
     assert (doc["status"], doc["partial"], doc["winner"]["composition"]) == ("done", False, name)
     assert doc["winner"]["verification"]["passed"]
+    statuses = [c["status"] for c in doc["candidates"]]
+    assert {s: doc["counts"][s] for s in ("optimal", "pruned", "failed", "stopped")} == {
+        s: statuses.count(s) for s in ("optimal", "pruned", "failed", "stopped")
+    }
     scenario = load_scenario(SMALL_SCENARIO)
     with open(out / "trajectory.csv") as f:
         rows = list(csv.DictReader(f))
@@ -88,6 +92,8 @@ def test_optimize_writes_a_motion_from_start_to_goal(tmp_path):
 def test_run_table_names_unconverged_candidates_below_the_winner():
     """A candidate that stopped at the iteration limit feasible and below the winner's cost is
     not ranked (SPEC §2), but the summary says so; an infeasible or costlier one is not named."""
+    from dataclasses import replace
+
     from modular_robots.cli_output import run_table
     from modular_robots.feasibility import FeasibilitySummary
     from modular_robots.ocp.candidate import CandidateResult
@@ -127,3 +133,7 @@ def test_run_table_names_unconverged_candidates_below_the_winner():
     ) in run_table(result, scenario)
     alone = RunResult((winner, candidates[3], candidates[4]), winner, FeasibilitySummary(), 10, {})
     assert "not converged" not in run_table(alone, scenario)
+    assert "terminal error 0.010 mm, min clearance 0.1000 m, 4 sub-steps" in run_table(alone, scenario)
+    free = replace(winner, verification=replace(verification, min_clearance=float("inf")))
+    free_table = run_table(RunResult((free,), free, FeasibilitySummary(), 1, {}), scenario)
+    assert "terminal error 0.010 mm, no obstacle within reach, 4 sub-steps" in free_table

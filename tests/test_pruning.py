@@ -938,7 +938,7 @@ def test_small_result_json(small_run_1):
     assert counts["enumerated"] == 516 and counts["feasible"] == 6 and counts["optimized"] == 6
     assert sum(counts["removed"].values()) == 516 - 6
     assert counts["remaining_after"]["collision"] == 6
-    assert counts["pruned"] + counts["failed"] + counts["optimal"] == 6
+    assert counts["pruned"] + counts["failed"] + counts["optimal"] == 6 and counts["stopped"] == 0
     assert counts["pruned"] == sum(c.status == "pruned" for c in run.candidates)
     assert {"feasibility", "optimization", "report"} <= set(doc["seconds"])
 
