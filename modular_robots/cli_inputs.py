@@ -237,7 +237,7 @@ jobs_option = click.option(
     type=Jobs(),
     default=0,
     show_default="all cores",
-    help="Worker processes (1: run in this process).",
+    help="Worker processes (0: every core; 1: run in this process).",
 )
 
 
