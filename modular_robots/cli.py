@@ -27,6 +27,7 @@ from .cli_inputs import (
 from .cli_output import (
     SURVIVOR_ROWS,
     LiveLine,
+    clearance_text,
     feasibility_json,
     feasibility_table,
     run_table,
@@ -319,7 +320,7 @@ def optimize_command(
         f"{result.seconds:.2f} s, {result.substeps} sub-steps per interval"
     )
     click.echo(
-        f"verified: terminal error {v.terminal_error * 1000:.3f} mm, min clearance {v.min_clearance:.4f} m, "
+        f"verified: terminal error {v.terminal_error * 1000:.3f} mm, {clearance_text(v.min_clearance)}, "
         f"velocity {v.velocity_ratio:.3f} x limit, torque {v.torque_ratio:.3f} x limit"
     )
     click.echo(f"wrote {written_files(out)}")

@@ -17,6 +17,7 @@ from .report import RESULT
 __all__ = [
     "LiveLine",
     "SURVIVOR_ROWS",
+    "clearance_text",
     "feasibility_json",
     "feasibility_table",
     "run_table",
@@ -54,9 +55,8 @@ def run_table(result, scenario) -> str:
         (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
         (
             "verification",
-            f"terminal error {v.terminal_error * 1000:.3f} mm, "
-            + (f"min clearance {v.min_clearance:.4f} m" if math.isfinite(v.min_clearance) else _NO_OBSTACLE)
-            + f", {w.substeps} sub-steps",
+            f"terminal error {v.terminal_error * 1000:.3f} mm, {clearance_text(v.min_clearance)}, "
+            f"{w.substeps} sub-steps",
         ),
         ("compositions", f"{result.feasibility.checked} enumerated, {result.feasibility.feasible} feasible"),
         (
@@ -139,6 +139,11 @@ def survivor_table(summary: FeasibilitySummary, limit: int = SURVIVOR_ROWS) -> s
     if summary.feasible > limit:
         lines.append(f"... and {summary.feasible - limit} more (see --out)")
     return "\n".join(lines)
+
+
+def clearance_text(clearance: float) -> str:
+    """A verified plan's smallest obstacle clearance [m] as the summaries print it."""
+    return f"min clearance {clearance:.4f} m" if math.isfinite(clearance) else _NO_OBSTACLE
 
 
 def _clearance_cell(clearance: float) -> str:

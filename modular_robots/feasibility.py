@@ -59,7 +59,6 @@ __all__ = [
     "composition_space",
     "estimate_seconds",
     "MAX_COMPOSITIONS",
-    "NEAREST_MISS",
 ]
 
 
@@ -579,7 +578,7 @@ def filter_compositions(
 
 #: Per test, the figure by which a removed composition's nearness to passing is judged, ``1`` if
 #: smaller is nearer (``-1`` if larger is), and the diagnosis line's words for the nearest.
-NEAREST_MISS = {
+_NEAREST_MISS: dict[str, tuple[str, int, str]] = {
     REACH.name: ("reach_margin", -1, "largest reach margin found: {:.3g} m"),
     WORKSPACE.name: ("workspace_excess", 1, "smallest distance to a workspace box: {:.3g} m"),
     INVERSE_KINEMATICS.name: ("ik_error", 1, "smallest IK error: {:.3g} m"),
@@ -607,7 +606,7 @@ class FeasibilitySummary:
     removed: dict[str, int] = field(default_factory=lambda: {t: 0 for t in TEST_NAMES})
     seconds: dict[str, float] = field(default_factory=lambda: {t: 0.0 for t in ("model",) + TEST_NAMES})
     #: Per test, the figure of the removed composition that came nearest to passing it and
-    #: ``"name: message"`` of that composition (see :data:`NEAREST_MISS`).
+    #: ``"name: message"`` of that composition (see ``_NEAREST_MISS``).
     nearest_misses: dict[str, tuple[float, str]] = field(default_factory=dict)
     _kept: list = field(default_factory=list, init=False, repr=False)
 
@@ -638,10 +637,10 @@ class FeasibilitySummary:
             return
         test = verdict.failed_test
         self.removed[test] += 1
-        key, sign, _ = NEAREST_MISS[test]
+        key, sign, _ = _NEAREST_MISS[test]
         value = verdict.figures.get(key)
         nearest = self.nearest_misses.get(test)
-        if value is not None and (nearest is None or sign * value < sign * nearest[0]):
+        if value is not None and not math.isnan(value) and (nearest is None or sign * value < sign * nearest[0]):
             self.nearest_misses[test] = (value, f"{verdict.composition.name}: {verdict.message}")
 
     def counts(self) -> dict:
@@ -673,5 +672,5 @@ class FeasibilitySummary:
         for test in reversed(TEST_NAMES):  # the later a test, the nearer its removed came to passing
             if test in self.nearest_misses:
                 value, miss = self.nearest_misses[test]
-                lines.append(f"{NEAREST_MISS[test][2].format(value)} ({miss})")
+                lines.append(f"{_NEAREST_MISS[test][2].format(value)} ({miss})")
         return "\n".join(lines)

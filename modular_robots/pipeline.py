@@ -112,8 +112,8 @@ def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
 
 
 def _status_counts(results: Iterable[CandidateResult]) -> dict[str, int]:
-    """Candidates per status; ``stopped``: not started or closed before they ended (0 at the end
-    of a run that was not interrupted)."""
+    """Candidates per status; ``stopped``: not started, or closed before they ended (while a run
+    goes on, and after an interruption or an error)."""
     statuses = [r.status for r in results]
     return {str(s): statuses.count(s) for s in CandidateStatus}
 

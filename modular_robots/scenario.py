@@ -167,6 +167,11 @@ def _scenario_from_fields(top: Fields) -> Scenario:
     return Scenario(name, catalog, task, optimizer, pruning, path, execution)
 
 
+def _below(value: float, limit: float) -> str:
+    """``value`` with the fewest significant digits (3 to 12) that still show it below ``limit``."""
+    return next((text for digits in range(3, 13) if float(text := f"{value:.{digits}g}") < limit), f"{value!r}")
+
+
 def _read_task(f: Fields) -> Task:
     payload = f.number("payload", minimum=0.0)
     start = f.vector("start", 3)
@@ -174,7 +179,7 @@ def _read_task(f: Fields) -> Task:
     f.check(
         "goal",
         math.dist(start, goal) >= MIN_TRAVEL * (1.0 - 1e-9),  # 1 mm as decimals write it: 1.101 - 1.1 < 1e-3
-        f"the goal is {math.dist(start, goal) * 1000:.3g} mm from the start; expected at least "
+        f"the goal is {_below(math.dist(start, goal) * 1000, MIN_TRAVEL * 1000)} mm from the start; expected at least "
         f"{MIN_TRAVEL * 1000:g} mm (a task moves the payload)",
     )
     obstacles = []
