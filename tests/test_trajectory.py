@@ -128,6 +128,9 @@ def test_forward_transcription_rows_follow_the_contract():
     t, q, qd, qdd = trajectory.t, trajectory.q, trajectory.qd, trajectory.qdd
     h = np.diff(t)[:, None]
     assert h.max() <= 1e-3 + 1e-12
+    tf = problem.unpack(outcome.final.y)[0]
+    substeps = np.linspace(0.0, tf, problem.intervals * problem.substeps + 1)  # SPEC §7: a row at each
+    assert np.abs(t[:, None] - substeps[None, :]).min(axis=0).max() < 1e-12
     np.testing.assert_allclose(q[1:], q[:-1] + qd[:-1] * h + 0.5 * qdd[:-1] * h * h, rtol=0, atol=1e-12)
     np.testing.assert_allclose(qd[1:], qd[:-1] + qdd[:-1] * h, rtol=0, atol=1e-12)
     for k in range(0, len(t), 50):

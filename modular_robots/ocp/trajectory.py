@@ -4,14 +4,15 @@ resampling at a controller rate.
 **The acceleration contract.** On ``[t_i, t_{i+1})`` the joint acceleration is ``qdd_i``,
 constant, so each row follows exactly from the one before
 (``q_{i+1} = q_i + qd_i h + qdd_i h^2 / 2``, ``qd_{i+1} = qd_i + qdd_i h``), and ``tau_i`` is the
-inverse dynamics at ``(q_i, qd_i, qdd_i)`` with the drive's armature: the torque the drive must
-deliver at that instant. Where the acceleration jumps, a row carries the value that starts there;
+inverse dynamics at ``(q_i, qd_i, qdd_i)`` with the drive's armature and friction: the torque the
+drive must deliver at that instant. Where the acceleration jumps, a row carries the value that starts there;
 the last row, at ``tf``, the robot at rest (``qdd = 0``, the holding torque).
 
 * The inverse transcription's plan *is* such a motion (a parabola per interval), so its rows are
   the integration sub-steps and the contract holds to rounding.
 * The forward transcription's acceleration changes continuously within an interval, so its rows
-  are dense (:data:`FORWARD_ROW_STEP` apart) and each ``qdd_i`` is the plan's mean acceleration
+  are dense (at most :data:`FORWARD_ROW_STEP` apart, the sub-steps among them) and each ``qdd_i``
+  is the plan's mean acceleration
   to the next row (its velocities re-integrated from each planned node under the interval's
   torque): the rows follow the plan's velocities exactly and its positions to about
   ``|jerk| h^3 / 12`` per row.
@@ -205,7 +206,7 @@ def sample_trajectory(problem, y: np.ndarray) -> Trajectory:
         t = np.linspace(0.0, tf, N * S + 1)
         qdd = np.vstack([np.repeat(controls, S, axis=0), np.zeros(nv)])
     else:
-        t, qd = _dense_velocities(robot, tr, nodes, controls, tf / N)
+        t, qd = _dense_velocities(robot, tr, nodes, controls, tf / N, S)
         qdd = np.vstack([np.diff(qd, axis=0) / np.diff(t)[:, None], np.zeros(nv)])
     q, qd = _chain(t, nodes[0, :nv], nodes[0, nv:], qdd)
     tau = robot.rnea(q, qd, qdd)
@@ -230,11 +231,12 @@ def _chain(t: np.ndarray, q0: np.ndarray, qd0: np.ndarray, qdd: np.ndarray) -> t
     return q, qd
 
 
-def _dense_velocities(robot: RobotModel, tr, nodes: np.ndarray, controls: np.ndarray, h_interval: float):
-    """Row times at most :data:`FORWARD_ROW_STEP` apart and the plan's velocities there: each
-    interval re-integrated (DOP853) from its planned node under its control law."""
+def _dense_velocities(robot: RobotModel, tr, nodes: np.ndarray, controls: np.ndarray, h_interval: float, substeps: int):
+    """Row times at most :data:`FORWARD_ROW_STEP` apart, every node and integration sub-step among
+    them (SPEC §7), and the plan's velocities there: each interval re-integrated (DOP853) from its
+    planned node under its control law."""
     nv = robot.nv
-    k = max(1, math.ceil(h_interval / FORWARD_ROW_STEP - 1e-9))
+    k = substeps * max(1, math.ceil(h_interval / (substeps * FORWARD_ROW_STEP) - 1e-9))
     local = np.linspace(0.0, h_interval, k + 1)
     times, velocities = [], []
     for m in range(len(controls)):
