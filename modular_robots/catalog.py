@@ -20,6 +20,13 @@ from typing import Literal
 from ._yamlio import Fields, load_yaml
 from .exceptions import CatalogError, shorten
 from .modules import (
+    MAX_ARMATURE,
+    MAX_EFFORT,
+    MAX_MASS,
+    MAX_POSITION,
+    MAX_SIZE,
+    MAX_VELOCITY,
+    MIN_VELOCITY,
     AssemblyGrammar,
     GeneralModule,
     _physical_inertia,
@@ -201,14 +208,6 @@ def _general_catalog(top: Fields) -> Catalog:
     return Catalog(name, tuple(modules.values()), grammar, str(top.path), tuple(notes))
 
 
-#: Bounds on a module's numbers (SI units), beyond which no module of a buildable robot lies and
-#: the arithmetic of steps B and C breaks down (e.g. a 1e9 m link makes IK's systems singular).
-MAX_SIZE = 10.0  # length, diameter [m]
-MAX_MASS = 1e5  # [kg]
-MAX_ARMATURE = 1e3  # [kg m^2 | kg]
-MAX_POSITION = 100.0  # joint limits [rad | m]
-MIN_VELOCITY, MAX_VELOCITY = 1e-3, 1e3  # [rad/s | m/s]
-MAX_EFFORT = 1e6  # [N m | N]
 _TURN = "a twist is an angle in degrees; beyond a turn, it is a typo"
 #: The longest module id: an id is part of every composition name and URDF link name.
 MAX_ID_LENGTH = 100

@@ -37,6 +37,16 @@ __all__ = [
 
 IDENTITY_XYZ = (0.0, 0.0, 0.0)
 
+#: Bounds on a module's numbers (SI units) in either catalogue format, beyond which no module of a
+#: buildable robot lies and the arithmetic of steps B and C breaks down (e.g. a 1e9 m link makes
+#: IK's systems singular).
+MAX_SIZE = 10.0  # lengths, diameters, radii [m]
+MAX_MASS = 1e5  # [kg]
+MAX_ARMATURE = 1e3  # [kg m^2 | kg]
+MAX_POSITION = 100.0  # joint limits [rad | m]
+MIN_VELOCITY, MAX_VELOCITY = 1e-3, 1e3  # [rad/s | m/s]
+MAX_EFFORT = 1e6  # [N m | N]
+
 
 @dataclass(frozen=True)
 class Pose:
@@ -227,8 +237,8 @@ def _pose(f: Fields, key: str) -> Pose:
 
 def _shape(f: Fields) -> Shape:
     kind = f.string("shape", choices=("sphere", "capsule"))
-    radius = f.number("radius", exclusive_minimum=0.0, maximum=10.0)
-    length = f.number("length", exclusive_minimum=0.0, maximum=10.0) if kind == "capsule" else 0.0
+    radius = f.number("radius", exclusive_minimum=0.0, maximum=MAX_SIZE)
+    length = f.number("length", exclusive_minimum=0.0, maximum=MAX_SIZE) if kind == "capsule" else 0.0
     pose = _pose(f, "pose")
     f.done()
     return Shape(radius, length, pose)
@@ -236,7 +246,7 @@ def _shape(f: Fields) -> Shape:
 
 def _body(f: Fields) -> Body:
     body_id = _identifier(f, "id")
-    mass = f.number("mass", default=0.0, minimum=0.0, maximum=1e5)
+    mass = f.number("mass", default=0.0, minimum=0.0, maximum=MAX_MASS)
     com = tuple(f.vector("com", 3, IDENTITY_XYZ))
     inertia = tuple(f.vector("inertia", 6, (0.0,) * 6))
     if mass > 0.0:
@@ -258,7 +268,7 @@ def _drive(f: Fields) -> Drive:
     viscous = f.number("viscous", default=0.0, minimum=0.0, maximum=1e6)
     if f.has("armature"):
         f.check("gear_ratio", not f.has("gear_ratio"), "give either armature or gear_ratio and motor_inertia")
-        return Drive(armature=f.number("armature", minimum=0.0, maximum=1e3), coulomb=coulomb, viscous=viscous)
+        return Drive(armature=f.number("armature", minimum=0.0, maximum=MAX_ARMATURE), coulomb=coulomb, viscous=viscous)
     ratio = f.number("gear_ratio", default=1.0, exclusive_minimum=0.0, maximum=1e5)
     inertia = f.number("motor_inertia", default=0.0, minimum=0.0, maximum=1e3)
     return Drive(inertia * ratio * ratio, coulomb, viscous, ratio, inertia)
@@ -270,9 +280,14 @@ def _joint(f: Fields) -> Joint:
     parent, child = _identifier(f, "parent"), _identifier(f, "child")
     limits = f.mapping("limits")
     lower, upper = limits.interval("position")
-    limits.check("position", lower < upper and max(-lower, upper) <= 100.0, "expected finite limits lower < upper")
-    velocity = limits.number("velocity", minimum=1e-3, maximum=1e3)
-    effort = limits.number("effort", exclusive_minimum=0.0, maximum=1e6)
+    limits.check("position", lower < upper, f"expected [lower, upper] with lower < upper, got [{lower:g}, {upper:g}]")
+    limits.check(
+        "position",
+        max(-lower, upper) <= MAX_POSITION,
+        f"expected limits within +-{MAX_POSITION:g} (rad or m), got [{lower:g}, {upper:g}]",
+    )
+    velocity = limits.number("velocity", minimum=MIN_VELOCITY, maximum=MAX_VELOCITY)
+    effort = limits.number("effort", exclusive_minimum=0.0, maximum=MAX_EFFORT)
     acceleration = limits.number("acceleration", default=None, exclusive_minimum=0.0, maximum=1e6)
     limits.done()
     parent_pose, child_pose = _pose(f, "parent_pose"), _pose(f, "child_pose")

@@ -405,3 +405,17 @@ def test_cli_counts_improv_and_imports_with_overrides_named(tmp_path):
     assert_same_catalogue(out.read_text("utf-8"), (CATALOGS / "geometric.yaml").read_text("utf-8"))
     result = CliRunner().invoke(main, ["import-timor", str(GEOMETRIC_JSON), "-o", str(out)])
     assert result.exit_code != 0 and "Prismatic.limits.velocity: [inf] is not finite" in result.output
+
+
+def test_a_general_joint_limit_beyond_100_is_refused_with_the_bound(tmp_path):
+    """The general format bounds joint positions as convention A does, and says so."""
+    text = (ROOT / "scenarios" / "catalogs" / "improv-4dof.yaml").read_text()
+    data = yaml.safe_load(text)
+    joint = next(j for m in data["modules"] for j in m.get("joints", ()))
+    joint["limits"]["position"] = [-200.0, 200.0]
+    path = tmp_path / "wide.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(
+        CatalogError, match=r"limits\.position: expected limits within \+-100 \(rad or m\), got \[-200, 200\]"
+    ):
+        load_catalog(path)
