@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from modular_robots.catalog import load_catalog
 from modular_robots.composition import Composition, enumerate_compositions
@@ -52,6 +53,32 @@ def catalog_path() -> Path:
 @pytest.fixture(scope="module")
 def cat(catalog_path):
     return load_catalog(catalog_path)
+
+
+def _asymmetric(module: dict) -> dict:
+    """``module`` with a full inertia tensor (products of inertia too), an off-axis centre of mass
+    and, if it moves, armature: terms the paper's catalogue leaves at zero or symmetric, which a
+    swapped or dropped term in the URDF or the model would otherwise hide."""
+    out = dict(module)
+    mass = out.get("mass", 0.0)
+    if mass > 0.0:
+        out["inertia"] = [x * mass for x in (2.0e-3, 1.5e-3, 1.0e-3, 2.0e-4, -1.0e-4, 1.5e-4)]
+        out["com"] = [0.02, -0.03, 0.5 * out.get("length", 0.0)]
+    if "joint" in out:
+        out["armature"] = 0.05 if out["joint"] == "revolute" else 0.3
+    return out
+
+
+@pytest.fixture(scope="module", params=["paper", "asymmetric"])
+def dyn_cat(request, tmp_path_factory):
+    """The paper's catalogue, and the same modules with every inertial term non-zero."""
+    if request.param == "paper":
+        return load_catalog(CATALOG_PATH)
+    data = yaml.safe_load(CATALOG_PATH.read_text())
+    data["modules"] = [_asymmetric(m) for m in data["modules"]]
+    path = tmp_path_factory.mktemp("asymmetric") / "asymmetric.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return load_catalog(path)
 
 
 def _seed(*parts) -> int:
@@ -263,11 +290,11 @@ def test_tool_position_and_jacobian_match_spec_chain(cat, name):
 # --------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("payload", PAYLOADS, ids=[f"{p:g}kg" for p in PAYLOADS])
 @pytest.mark.parametrize("family,name", DYNAMICS_CASES, ids=[f"{f}:{n}" for f, n in DYNAMICS_CASES])
-def test_rnea_matches_independent_newton_euler(cat, family, name, payload):
+def test_rnea_matches_independent_newton_euler(dyn_cat, family, name, payload):
     """r.rnea(q, v, a) == the test's Newton-Euler from catalogue numbers (gravity, Coriolis,
     centripetal and inertial terms; payload sphere at tool0), one point at a time and as rows."""
-    mods = modules_of(name, cat)
-    r = robot_model(Composition.from_name(name, cat), cat, payload)
+    mods = modules_of(name, dyn_cat)
+    r = robot_model(Composition.from_name(name, dyn_cat), dyn_cat, payload)
     gravity = r.model.gravity.linear.copy()
     rng = np.random.default_rng(_seed("rnea", name, payload))
     states = [random_state(mods, rng) for _ in range(4)]
@@ -307,11 +334,11 @@ def test_newton_euler_reference_is_sensitive():
 # --------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("payload", [0.0, 5.0], ids=["0kg", "5kg"])
 @pytest.mark.parametrize("family,name", DYNAMICS_CASES, ids=[f"{f}:{n}" for f, n in DYNAMICS_CASES])
-def test_mass_matrix_spd_and_equals_newton_euler_columns(cat, family, name, payload):
+def test_mass_matrix_spd_and_equals_newton_euler_columns(dyn_cat, family, name, payload):
     """M(q) is symmetric positive definite and equals, column by column, the test's
     Newton-Euler with v = 0, gravity = 0 and a = e_i."""
-    mods = modules_of(name, cat)
-    r = robot_model(Composition.from_name(name, cat), cat, payload)
+    mods = modules_of(name, dyn_cat)
+    r = robot_model(Composition.from_name(name, dyn_cat), dyn_cat, payload)
     rng = np.random.default_rng(_seed("crba", name, payload))
     for _ in range(3):
         q, _, _ = random_state(mods, rng)
@@ -328,12 +355,12 @@ def test_mass_matrix_spd_and_equals_newton_euler_columns(cat, family, name, payl
 
 @pytest.mark.parametrize("payload", [0.0, 5.0], ids=["0kg", "5kg"])
 @pytest.mark.parametrize("family,name", DYNAMICS_CASES, ids=[f"{f}:{n}" for f, n in DYNAMICS_CASES])
-def test_aba_inverts_independent_inverse_dynamics(cat, family, name, payload):
+def test_aba_inverts_independent_inverse_dynamics(dyn_cat, family, name, payload):
     """aba(q, v, tau) == a when tau comes from the test's Newton-Euler (not from Pinocchio),
     and aba(q, v, rnea(q, v, a)) == a (ABA and RNEA are different algorithms); one point at a
     time and as rows."""
-    mods = modules_of(name, cat)
-    r = robot_model(Composition.from_name(name, cat), cat, payload)
+    mods = modules_of(name, dyn_cat)
+    r = robot_model(Composition.from_name(name, dyn_cat), dyn_cat, payload)
     gravity = r.model.gravity.linear.copy()
     rng = np.random.default_rng(_seed("aba", name, payload))
     q, v, a = map(np.array, zip(*(random_state(mods, rng) for _ in range(3))))
