@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 from modular_robots import Composition, load_scenario
+from modular_robots.ocp.candidate import BoundaryPair, CandidateSpec, make_candidate
+from modular_robots.pipeline import cost_bound
 
 from .conftest import ROOT
 
@@ -45,7 +47,22 @@ def test_the_bound_never_exceeds_an_optimum_on_the_suite():
         travel = np.abs(np.subtract(entry["q_goal"], entry["q_start"]))
         bound = float(np.max(travel / velocity))
         assert entry["cost_bound"] == pytest.approx(bound, rel=1e-12), entry["candidate"]
+        # the bound the run uses now (admission and pruning), from the package's own code
+        spec = CandidateSpec(composition, tuple(entry["q_start"]), tuple(entry["q_goal"]), BoundaryPair.FASTEST)
+        assert cost_bound(scenario, spec) == pytest.approx(bound, rel=1e-12), entry["candidate"]
         if entry["cost"] is not None:
             optima += 1
             assert bound <= entry["cost"], (entry["scenario"], entry["candidate"], bound, entry["cost"])
     assert optima >= 100  # the check covers the suite's optima, not a handful
+
+
+def test_the_admission_bound_is_the_problem_bound():
+    """``pipeline.cost_bound`` (admission, before a candidate is built) is the bound its shooting
+    problem carries (pruning), for both boundary pairs of a few suite candidates."""
+    entries = _entries()[:: max(1, len(_entries()) // 4)][:4]
+    for entry in entries:
+        scenario = load_scenario(SUITE / f"{entry['scenario']}.yaml")
+        composition = Composition.from_name(entry["composition"], scenario.catalog)
+        for pair in BoundaryPair:
+            spec = CandidateSpec(composition, tuple(entry["q_start"]), tuple(entry["q_goal"]), pair)
+            assert cost_bound(scenario, spec) == make_candidate(scenario, spec).problem.cost_bound > 0.0

@@ -337,7 +337,8 @@ def test_step_b_reach_bound_holds_for_general_modules():
         composition = Composition.from_name(name, catalog)
         robot = robot_model(composition, catalog)
         reached = max(np.linalg.norm(robot.tool_position(rng.uniform(robot.lower, robot.upper))) for _ in range(500))
-        assert reached <= max_reach(composition, catalog)
+        # a bound, and a useful one: 1.14 and 1.13 times the farthest of the samples here
+        assert reached <= max_reach(composition, catalog) <= 1.25 * reached
 
 
 def test_improv_pick_step_b_keeps_the_assemblies_that_reach_and_hold():
@@ -353,7 +354,8 @@ def test_improv_pick_step_b_keeps_the_assemblies_that_reach_and_hold():
         summary.add(verdict)
     assert summary.checked == 48
     assert len(summary.survivors) == 17
-    assert summary.removed["static torque"] == 0
+    # each test removes its own: a looser reach bound would leave its 5 to inverse kinematics
+    assert summary.removed == {"reach": 5, "workspace": 2, "inverse kinematics": 24, "static torque": 0, "collision": 0}
     assert max(v.figures["torque_ratio"] for v in summary.survivors) < 0.5
 
 
