@@ -377,12 +377,18 @@ def run_command(
         err=True,
     )
     with LiveLine() as live:
+        step_b = {}
 
         def progress(stage, f):
             if stage == "feasibility":
+                step_b.update(f)
                 if f["checked"] % 50 == 0:
                     live.show(f"steps A+B: {f['checked']} compositions checked, {f['feasible']} feasible")
             else:
+                if step_b:  # step B's final count, before step C's lines
+                    live.show(f"steps A+B: {step_b['checked']} compositions checked, {step_b['feasible']} feasible")
+                    live.settle()
+                    step_b.clear()
                 best = "-" if f["best_optimal"] is None else f"{f['best_optimal']:.4g}"
                 reference = "-" if f["best_cost"] is None else f"{f['best_cost']:.4g}"
                 live.show(

@@ -109,11 +109,16 @@ class LiveLine:
         elif self.count % 10 == 1:
             click.echo(text, err=True)
 
-    def __exit__(self, *exc):
+    def settle(self) -> None:
+        """Leave the last line shown (a stage's final figures) and start the next on a new one."""
         if self.tty and self.count:
             click.echo("", err=True)
         elif self.text and self.count % 10 != 1:
             click.echo(self.text, err=True)
+        self.count, self.text = 0, ""
+
+    def __exit__(self, *exc):
+        self.settle()
         return False
 
 

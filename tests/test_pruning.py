@@ -1061,6 +1061,7 @@ def test_small_ratio_winner_equals_brute_force_winner(small_run_1, small_cli_non
     cli, doc, out = small_cli_none
     assert cli.exit_code == 0, cli.output
     assert re.search(rf"^winner +{SMALL_WINNER}$", cli.output, re.M), cli.output
+    assert "steps A+B: 516 compositions checked, 6 feasible\n" in cli.output  # step B's final count shown
     assert doc["status"] == "done" and doc["settings"]["pruning"]["rule"] == "none"
     assert doc["winner"]["composition"] == ratio.winner.name == SMALL_WINNER
     assert doc["winner"]["tf"] == pytest.approx(ratio.winner.tf, rel=1e-6)
