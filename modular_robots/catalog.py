@@ -21,14 +21,11 @@ from ._yamlio import Fields, load_yaml
 from .exceptions import CatalogError, shorten
 from .modules import (
     MAX_ARMATURE,
-    MAX_EFFORT,
     MAX_MASS,
-    MAX_POSITION,
     MAX_SIZE,
-    MAX_VELOCITY,
-    MIN_VELOCITY,
     AssemblyGrammar,
     GeneralModule,
+    _joint_limits,
     _physical_inertia,
     check_grammar_ids,
     read_assembly_grammar,
@@ -271,6 +268,7 @@ def _read_module(f: Fields) -> Module:
         limits = _read_limits(f.mapping("limits"), joint)
     else:
         f.check("limits", not f.has("limits"), "a module without a joint has no limits; remove the key")
+        f.check("armature", not f.has("armature"), "a module without a joint has no armature; remove the key")
     armature = f.number("armature", default=0.0, minimum=0.0, maximum=MAX_ARMATURE)
     collision = f.string("collision", default="capsule" if kind == "link" else "sphere", choices=COLLISION_SHAPES)
     twist_in = math.radians(f.number("twist_in_deg", default=0.0, minimum=-360.0, maximum=360.0, why=_TURN))
@@ -320,14 +318,6 @@ def _read_inertia(f: Fields, mass: float, diameter: float, length: float):
 
 
 def _read_limits(f: Fields, joint: str) -> JointLimits:
-    lower, upper = f.interval("position")
-    f.check("position", lower < upper, f"expected [lower, upper] with lower < upper, got [{lower:g}, {upper:g}]")
-    f.check(
-        "position",
-        max(abs(lower), abs(upper)) <= MAX_POSITION,
-        f"expected limits within +-{MAX_POSITION:g} (rad or m), got [{lower:g}, {upper:g}]",
-    )
-    velocity = f.number("velocity", minimum=MIN_VELOCITY, maximum=MAX_VELOCITY)
-    effort = f.number("effort", exclusive_minimum=0.0, maximum=MAX_EFFORT)
+    lower, upper, velocity, effort = _joint_limits(f)
     f.done()
     return JointLimits(lower=lower, upper=upper, velocity=velocity, effort=effort)

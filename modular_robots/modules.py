@@ -274,20 +274,27 @@ def _drive(f: Fields) -> Drive:
     return Drive(inertia * ratio * ratio, coulomb, viscous, ratio, inertia)
 
 
+def _joint_limits(f: Fields) -> tuple[float, float, float, float]:
+    """A joint's ``position: [lower, upper]``, ``velocity`` and ``effort`` limits, in either
+    catalogue format, within the module bounds."""
+    lower, upper = f.vector("position", 2)
+    f.check("position", lower < upper, f"expected [lower, upper] with lower < upper, got [{lower:g}, {upper:g}]")
+    f.check(
+        "position",
+        max(-lower, upper) <= MAX_POSITION,
+        f"expected limits within +-{MAX_POSITION:g} (rad or m), got [{lower:g}, {upper:g}]",
+    )
+    velocity = f.number("velocity", minimum=MIN_VELOCITY, maximum=MAX_VELOCITY)
+    effort = f.number("effort", exclusive_minimum=0.0, maximum=MAX_EFFORT)
+    return lower, upper, velocity, effort
+
+
 def _joint(f: Fields) -> Joint:
     joint_id = _identifier(f, "id")
     kind = f.string("type", choices=JOINT_TYPES)
     parent, child = _identifier(f, "parent"), _identifier(f, "child")
     limits = f.mapping("limits")
-    lower, upper = limits.interval("position")
-    limits.check("position", lower < upper, f"expected [lower, upper] with lower < upper, got [{lower:g}, {upper:g}]")
-    limits.check(
-        "position",
-        max(-lower, upper) <= MAX_POSITION,
-        f"expected limits within +-{MAX_POSITION:g} (rad or m), got [{lower:g}, {upper:g}]",
-    )
-    velocity = limits.number("velocity", minimum=MIN_VELOCITY, maximum=MAX_VELOCITY)
-    effort = limits.number("effort", exclusive_minimum=0.0, maximum=MAX_EFFORT)
+    lower, upper, velocity, effort = _joint_limits(limits)
     acceleration = limits.number("acceleration", default=None, exclusive_minimum=0.0, maximum=1e6)
     limits.done()
     parent_pose, child_pose = _pose(f, "parent_pose"), _pose(f, "child_pose")
