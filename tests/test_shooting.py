@@ -1073,3 +1073,27 @@ def test_refinement_doubles_substeps_until_the_motion_verifies():
     _, v, end = replay_arm(coarse_problem.refined(result.substeps, result.waypoints), result.y)
     assert np.linalg.norm(arm_points(end[:2])[2] - arm_points(ARM_GOAL)[2]) <= 0.01
     assert np.all(np.abs(v) <= ARM_VEL * (1.0 + 2e-3))
+
+
+def test_a_failure_says_when_holding_the_payload_exceeds_the_plans_share():
+    """B-J1-L2-J2-L1-J1-L3-J1-L1-E1 holds 5 kg at one of its ends with more than 0.9 of a joint's
+    limit (step B's static torque figure, from its own torque check), so a failed plan's reason
+    says so with that figure; B-J1-L3-J1-L2-J1-L1-J1-L1-E2 holds it well within the share."""
+    from modular_robots.ocp.candidate import _held_beyond_share
+
+    scenario = load_scenario(PAPER_5KG)
+    for name, held in (("B-J1-L2-J2-L1-J1-L3-J1-L1-E1", True), ("B-J1-L3-J1-L2-J1-L1-J1-L1-E2", False)):
+        composition = Composition.from_name(name, scenario.catalog)
+        verdict = check_composition(composition, scenario.catalog, scenario.task)
+        assert verdict.passed
+        problem = composition_problem(
+            composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
+        )
+        note = _held_beyond_share(problem)
+        assert (verdict.figures["torque_ratio"] > 0.9) == held
+        if held:
+            assert note.startswith("; holding the payload at the ")
+            assert f"takes {verdict.figures['torque_ratio']:.2f} of joint " in note
+            assert note.endswith("more than the plan may use (effort_margin 0.9)")
+        else:
+            assert note == ""

@@ -288,7 +288,8 @@ class Candidate:
                 self.problem = self.problem.refined(waypoints=swung)
                 outcome = yield from self._solve_restarting(self.problem, None, offset, refined)
             if outcome.status != "optimal":
-                self._finish(CandidateStatus(outcome.status), outcome.reason + self._note, None)
+                held = _held_beyond_share(self.problem) if outcome.status == "failed" else ""
+                self._finish(CandidateStatus(outcome.status), outcome.reason + self._note + held, None)
                 return
             start = time.perf_counter()
             previous, verification = verification, verify(self.problem, outcome.final.y)
@@ -358,6 +359,25 @@ def _crossing(previous: Verification | None, v: Verification) -> bool:
         and not previous.clearance_ok
         and not v.clearance_ok
         and v.min_clearance <= 0.5 * previous.min_clearance
+    )
+
+
+def _held_beyond_share(problem: ShootingProblem) -> str:
+    """Why a failed plan may have had no feasible point: holding the payload at rest at the start
+    or the goal needs more of a joint's effort limit than the plan may use (``effort_margin``);
+    empty if it does not. A plan can still leave the start accelerating, so this is a hint."""
+    robot, zero = problem.robot, np.zeros(problem.nv)
+    shares = {
+        label: np.abs(robot.rnea(q, zero, zero)) / robot.effort_limit
+        for label, q in (("start", problem.q_start), ("goal", problem.q_goal))
+    }
+    label = max(shares, key=lambda k: shares[k].max())
+    j = int(np.argmax(shares[label]))
+    if shares[label][j] <= problem.settings.effort_margin:
+        return ""
+    return (
+        f"; holding the payload at the {label} takes {shares[label][j]:.2f} of joint {j + 1}'s effort limit, "
+        f"more than the plan may use (effort_margin {problem.settings.effort_margin:g})"
     )
 
 
