@@ -184,6 +184,9 @@ def _read_task(f: Fields) -> Task:
     )
     obstacles = []
     for item in f.mappings("obstacles", default=()):
+        if not item.has("sphere"):  # another shape (box: ...) is an unknown key, not a missing sphere
+            item.raw("sphere", None)
+            item.done()
         sphere = item.mapping("sphere")
         center = sphere.vector("center", 3)
         radius = sphere.number("radius", exclusive_minimum=0.0)

@@ -394,6 +394,11 @@ def test_filter_checks_its_output_before_step_b(tmp_path):
         ("name: small", "name: ../x", "name: expected a name of at most 100 letters, digits, '.', '_' or '-'"),
         ("name: small", "name: " + "x" * 300, "(it names the results folder), got 'xxxxx"),
         ("threshold: 0.5", "threshold: 1.0e6\n  bogus: 1", "pruning.bogus: unknown key"),  # 1.0e6 read as a number
+        (
+            "obstacles:\n    - sphere:",
+            "obstacles:\n    - box:",
+            "task.obstacles[0].box: unknown key (expected one of: sphere)",
+        ),
     ],
 )
 def test_senseless_scenario_values_are_refused_with_the_key(tmp_path, old, new, message):
