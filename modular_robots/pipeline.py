@@ -32,7 +32,7 @@ from .feasibility import (
     filter_compositions,
 )
 from .ocp.candidate import BoundaryPair, CandidateResult, CandidateSpec, CandidateStatus, make_candidate
-from .ocp.solver import Iterate
+from .ocp.solver import ITERATION_LIMIT, Iterate
 from .ocp.tracking import Tracking, track
 from .pruning import Progress, PruningManager
 from .recorder import RunRecorder
@@ -79,7 +79,7 @@ class RunResult:
             c
             for c in self.candidates
             if c.status == CandidateStatus.FAILED
-            and c.reason.startswith("iteration limit")
+            and c.reason.startswith(ITERATION_LIMIT)
             and c.constraint_violation <= constraint_tolerance
             and c.cost < self.winner.cost
         )

@@ -32,7 +32,10 @@ from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
 from .shooting import ShootingProblem
 from .trust_constr import solver_thread
 
-__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS"]
+__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS", "ITERATION_LIMIT"]
+
+#: How the reason of a solve that stopped at its iteration limit begins.
+ITERATION_LIMIT = "iteration limit"
 
 logger = logging.getLogger(__name__)
 
@@ -299,7 +302,7 @@ class ShootingSolver:
         elif result.status == 0:
             self._finish(
                 "failed",
-                f"iteration limit ({self.max_iterations}) reached, constraint violation {violation:.2g}",
+                f"{ITERATION_LIMIT} ({self.max_iterations}) reached, constraint violation {violation:.2g}",
                 result,
                 limit_reached=True,
             )
