@@ -4,7 +4,7 @@ Everything is read from the project's own objects, nothing is copied by hand: th
 inertias and armature from the Pinocchio model of a :class:`~modular_robots.robot.RobotModel`;
 variables, scaling, bounds, constraint rows (their order, scale and which are kept), the initial
 guess and the tolerances from a :class:`~modular_robots.ocp.shooting.ShootingProblem` (inverse
-transcription, ``time`` cost). ``tests/test_casadi_peer.py`` checks the symbolic RNEA against
+transcription, ``time`` cost). ``benchmarks/test_casadi_peer.py`` checks the symbolic RNEA against
 Pinocchio's and the constraint vector against the project's at the initial guess.
 
 The PyPI ``pin`` wheel has no ``pinocchio.casadi``, hence the recursive Newton-Euler written here
@@ -177,6 +177,8 @@ class PeerNLP:
         controls = [z[problem._u0 + m * nv : problem._u0 + (m + 1) * nv] for m in range(N)]
         collision = problem.collision
         obstacles = collision.obstacles if collision else ()
+        if any(o.kind != "sphere" for o in obstacles):
+            raise NotImplementedError("the peer writes the distance to sphere obstacles only")
         primitives = collision.primitive_indices if collision else ()
         continuity, path, middle, clear, torque = [], [], [], [], []
         for m in range(N):

@@ -468,7 +468,7 @@ def build() -> str:
             _measured(margins),
             "Each scenario run with the default margins and at the full limits; the winner tracked at "
             "1 kHz by computed torque on its exported URDF, torques clipped at the URDF's limits "
-            "(`modular_robots/ocp/tracking.py`):",
+            "(`modular_robots/plan/tracking.py`):",
             "",
             "| scenario | margins | winner | tf s | tf / full limits | effort used | velocity used | "
             "ticks clipped | tool error at tf mm | largest deviation mm | tracked speed / limit |",

@@ -3,10 +3,10 @@
 The pipeline, one module per stage, data flowing one way: :mod:`~modular_robots.catalog` and
 :mod:`~modular_robots.scenario` (the input files) → :mod:`~modular_robots.composition` (step A)
 → :mod:`~modular_robots.urdf`, :mod:`~modular_robots.robot` and :mod:`~modular_robots.collision`
-(the models) → :mod:`~modular_robots.feasibility` (step B) → :mod:`modular_robots.ocp` (step C)
-→ :mod:`~modular_robots.pruning` (step D) → :mod:`~modular_robots.report`,
-:mod:`~modular_robots.viewer` and :mod:`~modular_robots.recorder` (step E); :func:`run_scenario`
-chains them all, :mod:`~modular_robots.execution` decides where work runs and
+(the models) → :mod:`~modular_robots.feasibility` (step B) → :mod:`modular_robots.ocp` (step C,
+whose results are :mod:`modular_robots.plan`'s values) → :mod:`~modular_robots.pruning` (step D)
+→ :mod:`~modular_robots.report`, :mod:`~modular_robots.viewer` and :mod:`~modular_robots.recorder`
+(step E); :func:`run_scenario` chains them all, :mod:`~modular_robots.execution` decides where work runs and
 :mod:`~modular_robots.folder` keeps a results folder honest (one run, whole files). Units are SI (m, kg, s, N, N m) and
 radians throughout.
 """
@@ -42,23 +42,28 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
     from .folder import ResultsFolder
     from .modules import GeneralModule
     from .ocp import (
-        BoundaryPair,
         Candidate,
-        CandidateResult,
         CandidateSpec,
-        CandidateStatus,
         Iterate,
         ShootingProblem,
         ShootingSolver,
         SolverOutcome,
-        Trajectory,
-        Verification,
         composition_problem,
         make_candidate,
         sample_trajectory,
         verify,
     )
     from .pipeline import RunResult, candidate_specs, optimize_composition, run_scenario
+    from .plan import (
+        BoundaryPair,
+        CandidateResult,
+        CandidateStatus,
+        ResultDocument,
+        Tracking,
+        Trajectory,
+        Verification,
+        read_document,
+    )
     from .pruning import PruningManager, RoundCosts, ratio_rule
     from .recorder import RunRecorder
     from .report import export_controller_rate, read_winner
@@ -106,6 +111,7 @@ __all__ = [
     "PruningSettings",
     "RobotModel",
     "RoundCosts",
+    "ResultDocument",
     "RunRecorder",
     "RunResult",
     "Scenario",
@@ -116,6 +122,7 @@ __all__ = [
     "SolverOutcome",
     "SphereObstacle",
     "Task",
+    "Tracking",
     "Trajectory",
     "Verdict",
     "Verification",
@@ -125,6 +132,7 @@ __all__ = [
     "closest_approach",
     "composition_space",
     "export_controller_rate",
+    "read_document",
     "read_winner",
     "write_viewer",
     "composition_problem",
@@ -150,11 +158,11 @@ __all__ = [
 #: line starts, and catches Ctrl-C, before the numerical libraries load.
 _PUBLIC = {
     "Approach": "collision",
-    "BoundaryPair": "ocp",
+    "BoundaryPair": "plan",
     "Candidate": "ocp",
-    "CandidateResult": "ocp",
+    "CandidateResult": "plan",
     "CandidateSpec": "ocp",
-    "CandidateStatus": "ocp",
+    "CandidateStatus": "plan",
     "Catalog": "catalog",
     "CatalogError": "exceptions",
     "CollisionModel": "collision",
@@ -183,6 +191,7 @@ _PUBLIC = {
     "PruningManager": "pruning",
     "PruningSettings": "scenario",
     "RobotModel": "robot",
+    "ResultDocument": "plan",
     "RoundCosts": "pruning",
     "RunRecorder": "recorder",
     "RunResult": "pipeline",
@@ -194,15 +203,17 @@ _PUBLIC = {
     "SolverOutcome": "ocp",
     "SphereObstacle": "scenario",
     "Task": "scenario",
-    "Trajectory": "ocp",
+    "Tracking": "plan",
+    "Trajectory": "plan",
     "Verdict": "feasibility",
-    "Verification": "ocp",
+    "Verification": "plan",
     "candidate_specs": "pipeline",
     "check_composition": "feasibility",
     "import_timor": "timor",
     "closest_approach": "collision",
     "composition_space": "feasibility",
     "export_controller_rate": "report",
+    "read_document": "plan",
     "read_winner": "report",
     "write_viewer": "viewer",
     "composition_problem": "ocp",

@@ -12,13 +12,16 @@ import re
 import stat
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypeVar, overload
 
 import yaml
 
 from .exceptions import InputError, shorten
 
 _MISSING = object()
+#: A getter's ``default``: returned as given when the key is absent, so it is part of the result's type.
+_D = TypeVar("_D")
+_S = TypeVar("_S", bound=str)
 #: The largest magnitude a number may have (SI units): beyond it, products overflow.
 MAX_MAGNITUDE = 1e9
 #: The largest file read as a scenario or catalogue [bytes].
@@ -251,7 +254,16 @@ class Fields:
             return default
         return self._data[key]
 
-    def string(self, key: str, default: Any = _MISSING, choices: tuple[str, ...] = ()) -> str:
+    # With ``choices``, the string is one of them (e.g. a ``Literal`` type's values).
+    @overload
+    def string(self, key: str) -> str: ...
+    @overload
+    def string(self, key: str, *, choices: tuple[_S, ...]) -> _S: ...
+    @overload
+    def string(self, key: str, default: _D) -> str | _D: ...
+    @overload
+    def string(self, key: str, default: _D, choices: tuple[_S, ...]) -> _S | _D: ...
+    def string(self, key: str, default: Any = _MISSING, choices: tuple[str, ...] = ()) -> Any:
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
             return value
@@ -261,6 +273,27 @@ class Fields:
             raise self.fail(key, f"expected one of {', '.join(choices)}; got {shorten(value)}")
         return value
 
+    @overload
+    def number(
+        self,
+        key: str,
+        *,
+        minimum: float | None = None,
+        exclusive_minimum: float | None = None,
+        maximum: float | None = None,
+        why: str = "",
+    ) -> float: ...
+    @overload
+    def number(
+        self,
+        key: str,
+        default: _D,
+        *,
+        minimum: float | None = None,
+        exclusive_minimum: float | None = None,
+        maximum: float | None = None,
+        why: str = "",
+    ) -> float | _D: ...
     def number(
         self,
         key: str,
@@ -270,7 +303,7 @@ class Fields:
         exclusive_minimum: float | None = None,
         maximum: float | None = None,
         why: str = "",
-    ) -> float:
+    ) -> Any:
         """A number in the bounds given; ``why`` says why the maximum (in the error)."""
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
@@ -280,6 +313,12 @@ class Fields:
             raise self.fail(key, f"expected a number <= {maximum:g}{why and f' ({why})'}, got {value:g}")
         return value
 
+    @overload
+    def integer(self, key: str, *, minimum: int | None = None, maximum: int | None = None, why: str = "") -> int: ...
+    @overload
+    def integer(
+        self, key: str, default: _D, *, minimum: int | None = None, maximum: int | None = None, why: str = ""
+    ) -> int | _D: ...
     def integer(
         self,
         key: str,
@@ -288,7 +327,7 @@ class Fields:
         minimum: int | None = None,
         maximum: int | None = None,
         why: str = "",
-    ) -> int:
+    ) -> Any:
         """An integer in ``[minimum, maximum]``; ``why`` says why the maximum (in the error)."""
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
@@ -310,6 +349,19 @@ class Fields:
             raise self.fail(key, f"expected true or false, got {_kind(value)}")
         return value
 
+    # The sizes read (2, 3, 6) give tuples of that length, which the dataclasses' fields expect.
+    @overload
+    def vector(self, key: str, size: Literal[2], default: tuple[float, float] = ...) -> tuple[float, float]: ...
+    @overload
+    def vector(
+        self, key: str, size: Literal[3], default: tuple[float, float, float] = ...
+    ) -> tuple[float, float, float]: ...
+    @overload
+    def vector(
+        self, key: str, size: Literal[6], default: tuple[float, float, float, float, float, float] = ...
+    ) -> tuple[float, float, float, float, float, float]: ...
+    @overload
+    def vector(self, key: str, size: int, default: tuple[float, ...] = ...) -> tuple[float, ...]: ...
     def vector(self, key: str, size: int, default: Any = _MISSING) -> tuple[float, ...]:
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
@@ -326,7 +378,11 @@ class Fields:
             raise self.fail(key, f"expected [low, high] with low <= high, got [{low:g}, {high:g}]")
         return low, high
 
-    def mapping(self, key: str, default: Any = _MISSING) -> Fields | None:
+    @overload
+    def mapping(self, key: str) -> Fields: ...
+    @overload
+    def mapping(self, key: str, default: _D) -> Fields | _D: ...
+    def mapping(self, key: str, default: Any = _MISSING) -> Any:
         value = self.raw(key, default)
         if value is default and default is not _MISSING:
             return value

@@ -15,8 +15,9 @@ and the runs, each in catalogue order.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from functools import cache
+from typing import cast
 
 from .catalog import Catalog
 from .modules import AssemblyGrammar, GeneralModule, RunPattern
@@ -31,10 +32,14 @@ class _Space:
 
     def __init__(self, catalog: Catalog):
         self.catalog = catalog
-        self.grammar: AssemblyGrammar = catalog.grammar
-        self.by_id: dict[str, GeneralModule] = {m.id: m for m in catalog.modules}
+        grammar = catalog.grammar
+        assert isinstance(grammar, AssemblyGrammar), "a general catalogue's grammar"
+        self.grammar: AssemblyGrammar = grammar
+        # A general catalogue's modules (its grammar is an AssemblyGrammar) are GeneralModules.
+        modules = cast("tuple[GeneralModule, ...]", catalog.modules)
+        self.by_id: dict[str, GeneralModule] = {m.id: m for m in modules}
         kinds: dict[str, list[str]] = {"base": [], "joint": [], "link": [], "effector": []}
-        for m in catalog.modules:
+        for m in modules:
             kinds[m.kind].append(m.id)
         self.bases, self.joints, self.links, self.effectors = (
             tuple(kinds[k]) for k in ("base", "joint", "link", "effector")
@@ -52,9 +57,9 @@ class _Space:
         g = self.grammar
         pattern: RunPattern | None = {"between": g.between_joints, "end": g.before_end}.get(where)
         if pattern is not None:
-            choices = [ids + ((),) if optional else ids for ids, optional in pattern.slots]
-            candidates = (tuple(x for x in combo if x != ()) for combo in itertools.product(*choices))
-            candidates = dict.fromkeys(candidates)  # a run listed twice by two slot choices counts once
+            choices = [(*ids, None) if optional else ids for ids, optional in pattern.slots]  # None: no module
+            runs = (tuple(x for x in combo if x is not None) for combo in itertools.product(*choices))
+            candidates: Iterable[Ids] = dict.fromkeys(runs)  # a run listed twice by two slot choices counts once
         else:
             low, high = {"between": g.links_between_joints, "start": g.links_before_first_joint}.get(
                 where, g.links_after_last_joint
@@ -196,7 +201,7 @@ def assembly_error(catalog: Catalog, ids: Ids) -> str | None:
         return f"has {dof} joints; the grammar allows {low} to {high}"
     joints = [i for i, k in enumerate(kinds) if k == "joint"]
     seq = tuple(ids[i] for i in joints)
-    g = catalog.grammar
+    g = space.grammar
     if g.joint_sequences is not None and seq not in g.joint_sequences:
         return f"joint modules {'-'.join(seq) or '(none)'} are not one of the grammar's joint_sequences"
     if not joints:

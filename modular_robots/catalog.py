@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Literal
+from typing import Literal, cast
 
 from ._yamlio import Fields, load_yaml
 from .exceptions import CatalogError, shorten
@@ -36,7 +36,7 @@ __all__ = ["JointLimits", "Module", "Grammar", "Catalog", "load_catalog"]
 
 Kind = Literal["base", "joint", "link", "effector"]
 JointType = Literal["fixed", "revolute", "prismatic"]
-KINDS: tuple[str, ...] = ("base", "joint", "link", "effector")
+KINDS: tuple[Kind, ...] = ("base", "joint", "link", "effector")
 COLLISION_SHAPES: tuple[str, ...] = ("sphere", "capsule", "none")
 
 
@@ -111,7 +111,7 @@ class Catalog:
         return isinstance(self.grammar, AssemblyGrammar)
 
     @cached_property
-    def _by_id(self) -> dict[str, Module]:
+    def _by_id(self) -> dict[str, Module | GeneralModule]:
         return {m.id: m for m in self.modules}
 
     @cached_property
@@ -129,6 +129,14 @@ class Catalog:
         return {name: value for name, value in self.__dict__.items() if name != "_hash"}
 
     def module(self, module_id: str) -> Module:
+        """The module ``module_id`` of a convention-A catalogue (``general`` False)."""
+        return cast(Module, self._lookup(module_id))  # such a catalogue holds Modules only
+
+    def general_module(self, module_id: str) -> GeneralModule:
+        """The module ``module_id`` of a general catalogue (``general`` True)."""
+        return cast(GeneralModule, self._lookup(module_id))  # such a catalogue holds GeneralModules only
+
+    def _lookup(self, module_id: str) -> Module | GeneralModule:
         try:
             return self._by_id[module_id]
         except KeyError:
@@ -138,7 +146,8 @@ class Catalog:
             ) from None
 
     def of_kind(self, kind: Kind) -> tuple[Module, ...]:
-        return tuple(m for m in self.modules if m.kind == kind)
+        """The modules of ``kind`` of a convention-A catalogue."""
+        return tuple(cast(Module, m) for m in self.modules if m.kind == kind)
 
 
 def solid_cylinder_inertia(mass: float, diameter: float, length: float) -> tuple[float, ...]:
@@ -247,11 +256,12 @@ def _read_module(f: Fields) -> Module:
         f"names), got {shorten(module_id)}",
     )
     kind = f.string("kind", choices=KINDS)
-    movable = ("revolute", "prismatic")
+    movable: tuple[JointType, ...] = ("revolute", "prismatic")
+    joint: JointType
     if kind == "joint":
         joint = f.string("joint", choices=movable)
     elif kind == "effector":
-        joint = f.string("joint", choices=("fixed",) + movable)
+        joint = f.string("joint", choices=("fixed", *movable))
     else:
         joint = "fixed"
         f.check("joint", not f.has("joint"), f"a {kind} module has no joint; remove the key")

@@ -9,6 +9,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -295,7 +296,9 @@ def optimize_command(
     ``run``); NAME+clear or NAME+fastest optimises from that pair only.
     """
     scenario = load_scenario(scenario_path)
-    overrides = {k: v for k, v in (("transcription", transcription), ("max_iterations", max_iterations)) if v}
+    overrides: dict[str, Any] = {
+        k: v for k, v in (("transcription", transcription), ("max_iterations", max_iterations)) if v
+    }
     scenario = replace(scenario, optimizer=replace(scenario.optimizer, **overrides))
     with LiveLine() as live:
 
@@ -315,6 +318,7 @@ def optimize_command(
                 err=True,
             )
     v = result.verification
+    assert v is not None  # the winner verified (optimize_composition raises otherwise)
     click.echo(
         f"{result.name}: tf = {result.tf:.4f} s, cost {result.cost:.4g}, {result.iterations} iterations, "
         f"{result.seconds:.2f} s, {result.substeps} sub-steps per interval"

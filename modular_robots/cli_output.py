@@ -3,16 +3,15 @@ JSON."""
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
 import click
 
-from .feasibility import TEST_NAMES, FeasibilitySummary
-from .ocp.candidate import BoundaryPair
-from .report import RESULT
+from .feasibility import TEST_NAMES, FeasibilitySummary, Verdict
+from .plan.boundary import BoundaryPair
+from .plan.document import RESULT, read_document
 
 __all__ = [
     "LiveLine",
@@ -35,9 +34,9 @@ SURVIVOR_ROWS = 25
 
 def written_files(out: Path) -> str:
     """The files of the results folder ``out``, as its ``result.json`` lists them."""
-    document = json.loads((out / RESULT).read_text())
-    files = (document.get("winner") or {}).get("files", {})
-    return f"{out}/ ({', '.join([RESULT, *files.values()])})"
+    winner = read_document(out).winner
+    files = winner.files.names() if winner is not None else ()
+    return f"{out}/ ({', '.join([RESULT, *files])})"
 
 
 def run_table(result, scenario) -> str:
@@ -134,7 +133,7 @@ def feasibility_table(summary: FeasibilitySummary) -> str:
 
 def survivor_table(summary: FeasibilitySummary, limit: int = SURVIVOR_ROWS) -> str:
     """The ``limit`` survivors with the smallest time bounds, and how many more there are."""
-    ranked = sorted(summary.survivors, key=lambda v: v.time_bound)
+    ranked = sorted(summary.survivors, key=_time_bound)
     lines = [f"{'composition':<34} {'dof':>3} {'time bound s':>12} {'torque ratio':>12} {'clearance m':>11}"]
     for v in ranked[:limit]:
         lines.append(
@@ -144,6 +143,12 @@ def survivor_table(summary: FeasibilitySummary, limit: int = SURVIVOR_ROWS) -> s
     if summary.feasible > limit:
         lines.append(f"... and {summary.feasible - limit} more (see --out)")
     return "\n".join(lines)
+
+
+def _time_bound(verdict: Verdict) -> float:
+    """A survivor's time bound [s], which every passing verdict has."""
+    assert verdict.time_bound is not None  # a survivor passed, and a passing verdict has one
+    return verdict.time_bound
 
 
 def clearance_text(clearance: float) -> str:

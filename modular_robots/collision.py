@@ -1,7 +1,8 @@
-"""Distances between a robot's collision primitives and sphere obstacles, with python-fcl.
+"""Distances between a robot's collision primitives and the obstacles around it, with python-fcl.
 
-Robot primitives are FCL capsules (links) and spheres (ports, payload); obstacles are FCL
-spheres. Distances are signed: negative when the shapes overlap (penetration depth).
+Robot primitives are FCL capsules (links) and spheres (ports, payload); obstacles are any shape of
+:mod:`~modular_robots.obstacles`, each giving its FCL object and the closed forms it has.
+Distances are signed: negative when the shapes overlap (penetration depth).
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ import fcl
 import numpy as np
 import pinocchio as pin
 
+from .obstacles import Obstacle
 from .robot import RobotModel
-from .scenario import SphereObstacle
 
 __all__ = [
     "CollisionModel",
@@ -25,7 +26,6 @@ __all__ = [
     "closest_approach",
     "PATH_CLEARANCE",
     "CULL_DISTANCE",
-    "penetration",
     "reach_bound",
 ]
 
@@ -35,8 +35,9 @@ PATH_CLEARANCE = 0.02
 #: Obstacles farther than this from everything the robot can reach [m] are left out of the
 #: distance computations (every clearance the package asks for is far smaller).
 CULL_DISTANCE = 1.0
-#: Margin [m] by which an axis bound must clear a threshold to decide a pair without FCL; FCL
-#: measures a capsule or sphere and a sphere in closed form, within 2e-15 m of the exact distance.
+#: Margin [m] by which a shape's distance bound must clear a threshold to decide a pair without
+#: FCL; FCL measures a capsule or sphere and a sphere in closed form, within 2e-15 m of the exact
+#: distance.
 _BOUND_SLACK = 1e-9
 
 
@@ -68,13 +69,13 @@ class CollisionModel:
     def __init__(
         self,
         robot: RobotModel,
-        obstacles: Sequence[SphereObstacle],
+        obstacles: Sequence[Obstacle],
         primitives: Sequence[int] | None = None,
         cull: bool = True,
     ):
         self.robot = robot
         reach = reach_bound(robot) + CULL_DISTANCE if cull else np.inf
-        near = [i for i, o in enumerate(obstacles) if np.linalg.norm(o.center) - o.radius <= reach]
+        near = [i for i, o in enumerate(obstacles) if _bounding_gap(o) <= reach]
         self.obstacles = tuple(obstacles[i] for i in near)
         #: For each obstacle kept, its index in the list given.
         self.given_index = tuple(near)
@@ -99,11 +100,14 @@ class CollisionModel:
                 if joint > 0:
                     start = model.joints[joint].idx_v
                     self._supports[i, start : start + model.joints[joint].nv] = True
-        self._centers = np.array([o.center for o in self.obstacles], dtype=float).reshape(-1, 3)
-        self._radii = np.array([o.radius for o in self.obstacles], dtype=float)
-        self._obstacle_objects = [
-            _shared_object(("obstacle", o.radius, *o.center), _obstacle_object, o) for o in self.obstacles
-        ]
+        #: The obstacles by shape: each class's batch methods take its own, by these indices.
+        self._groups: list[tuple[type[Obstacle], list[int]]] = []
+        for j, o in enumerate(self.obstacles):
+            group = next((g for g in self._groups if g[0] is type(o)), None)
+            if group is None:
+                self._groups.append(group := (type(o), []))
+            group[1].append(j)
+        self._obstacle_objects = [_shared_object(("obstacle", o), _obstacle_object, o) for o in self.obstacles]
 
     def distances(self, q: np.ndarray) -> Distances:
         """Signed distance of every (primitive, obstacle) pair at configuration ``q``."""
@@ -123,41 +127,47 @@ class CollisionModel:
     def _pair_distance(self, i: int, j: int, mid: np.ndarray, rot: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """Signed distance and witness points of primitive ``i``, placed (its FCL object) with its
         axis midpoint at ``mid`` and the rotation ``rot`` (axis: its third column), and obstacle
-        ``j``: FCL's while they are apart, :func:`penetration` when FCL reports an overlap."""
+        ``j``: FCL's while they are apart, the obstacle's closed form
+        (:meth:`~modular_robots.obstacles.Obstacle.penetration`) when FCL reports an overlap."""
         result = fcl.DistanceResult()
         d = fcl.distance(self._robot_objects[i], self._obstacle_objects[j], _NEAREST_POINTS, result)
-        if d >= 0.0:  # NumPy arrays, made anew on each read of the property
+        inside = None
+        if d < 0.0:
+            inside = self.obstacles[j].penetration(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i])
+        if inside is None:  # NumPy arrays, made anew on each read of the property
             on_robot, on_obstacle = result.nearest_points
             return d, on_robot, on_obstacle
-        return penetration(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i], self._centers[j], self._radii[j])
+        return inside
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
         and (if asked) its exact gradient with respect to ``q``, ``(n_obstacles, nv)``; one row of
         :meth:`closest_many`."""
         dist, grad = self.closest_many(np.asarray(q, dtype=float)[None], derivatives)
-        return dist[0], (grad[0] if derivatives else None)
+        return dist[0], (None if grad is None else grad[0])
 
     def closest_many(self, qs: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`closest` at every row of ``qs`` ``(K, nv)``: distances ``(K, n_obstacles)`` [m]
         and gradients ``(K, n_obstacles, nv)``.
 
-        The swept-sphere distance of every pair (axis segment to the obstacle's centre, less both
-        radii; vectorised over all configurations) picks, per configuration and obstacle, the
-        primitives within :data:`_BOUND_SLACK` of the closest (several on a tie, such as a joint's
-        sphere and the end of the link capsule beside it); FCL measures those, and the smallest
-        of its distances is the answer. The gradient of the
-        distance between a convex primitive and a sphere of centre ``c`` is ``n . dp/dq``: ``n``
-        is the unit direction from ``c`` to the obstacle's witness point, ``p`` the robot's
-        witness point moving with its frame. With Pinocchio's world-frame joint Jacobian ``J``
-        restricted to the joints that carry the frame, ``dp/dq = J_v + J_w x p``, so
+        Each shape's bounds on its distance to every primitive (vectorised over all
+        configurations; exact for a sphere: the distance from its centre to the axis segment, less
+        both radii) pick, per configuration and obstacle, the primitives whose lower bound is
+        within :data:`_BOUND_SLACK` of the smallest upper bound (several on a tie, such as a
+        joint's sphere and the end of the link capsule beside it); FCL measures those, and the
+        smallest of its distances is the answer. The gradient of the distance between a convex
+        primitive and a convex obstacle is ``n . dp/dq``: ``n`` the unit direction in which the
+        distance grows (the shape's :meth:`~modular_robots.obstacles.Obstacle.normals`; for a
+        sphere of centre ``c``, from ``c`` to its witness point), ``p`` the robot's witness point
+        moving with its frame. With Pinocchio's world-frame joint Jacobian ``J`` restricted to the
+        joints that carry the frame, ``dp/dq = J_v + J_w x p``, so
         ``n . dp/dq = n . J_v + (p x n) . J_w``.
         """
         qs = np.asarray(qs, dtype=float).reshape(-1, self.robot.nv)
         rot, mid, jac = self._placements(qs, derivatives)
-        centers = self._centers
-        gap = self._axis_gaps(rot, mid)  # (K, P, O)
-        measure = gap <= gap.min(axis=1, keepdims=True) + _BOUND_SLACK
+        n_obstacles = len(self.obstacles)
+        lower, upper = self._bounds(rot, mid)  # (K, P, O)
+        measure = lower <= upper.min(axis=1, keepdims=True) + _BOUND_SLACK
         dist = np.full(measure.shape, np.inf)
         on_robot = np.zeros(measure.shape + (3,))
         on_obstacle = np.zeros(measure.shape + (3,))
@@ -173,26 +183,41 @@ class CollisionModel:
             dist[ks, iis, js], on_robot[ks, iis, js], on_obstacle[ks, iis, js] = d, pr, po
         best = dist.argmin(axis=1)  # (K, O)
         rows = np.arange(len(qs))[:, None]
-        closest = dist[rows, best, np.arange(len(centers))]
+        closest = dist[rows, best, np.arange(n_obstacles)]
         if not derivatives:
             return closest, None
-        p = on_robot[rows, best, np.arange(len(centers))]  # (K, O, 3)
-        normal = on_obstacle[rows, best, np.arange(len(centers))] - centers
+        p = on_robot[rows, best, np.arange(n_obstacles)]  # (K, O, 3)
+        normal = self._normals(p, on_obstacle[rows, best, np.arange(n_obstacles)])
         normal /= np.linalg.norm(normal, axis=2, keepdims=True)
         grad = np.einsum("koc,kcv->kov", normal, jac[:, :3]) + np.einsum(
             "koc,kcv->kov", np.cross(p, normal), jac[:, 3:]
         )
         return closest, grad * self._supports[best]
 
-    def _axis_gaps(self, rot: np.ndarray, mid: np.ndarray) -> np.ndarray:
-        """Distance [m] from each obstacle's centre to each primitive's axis segment, less both
-        radii, ``(K, P, O)``: the distance of a capsule (or sphere) and a sphere, to rounding."""
-        axis = rot[..., 2]  # (K, P, 3)
-        offset = self._centers[None, None] - mid[:, :, None]  # (K, P, O, 3)
-        half = 0.5 * self._prim_lengths[None, :, None]
-        along = np.clip(np.einsum("kpoc,kpc->kpo", offset, axis), -half, half)
-        apart = np.linalg.norm(offset - along[..., None] * axis[:, :, None], axis=3)
-        return apart - self._prim_radii[None, :, None] - self._radii[None, None, :]
+    def _bounds(self, rot: np.ndarray, mid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds [m] on the signed distance of every (primitive, obstacle)
+        pair, ``(K, P, O)``, from each shape's :meth:`~modular_robots.obstacles.Obstacle.capsule_bounds`."""
+        shape = mid.shape[:2] + (len(self.obstacles),)
+        if len(self._groups) == 1:  # one shape: its batch is every obstacle, in order
+            cls, _ = self._groups[0]
+            return cls.capsule_bounds(self.obstacles, rot[..., 2], mid, 0.5 * self._prim_lengths, self._prim_radii)
+        lower, upper = np.empty(shape), np.empty(shape)
+        for cls, index in self._groups:
+            batch = [self.obstacles[j] for j in index]
+            low, up = cls.capsule_bounds(batch, rot[..., 2], mid, 0.5 * self._prim_lengths, self._prim_radii)
+            lower[..., index], upper[..., index] = low, up
+        return lower, upper
+
+    def _normals(self, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
+        """Each shape's :meth:`~modular_robots.obstacles.Obstacle.normals` at the witness points
+        ``(K, O, 3)``."""
+        if len(self._groups) == 1:
+            return self._groups[0][0].normals(self.obstacles, on_robot, on_obstacle)
+        normal = np.empty_like(on_obstacle)
+        for cls, index in self._groups:
+            batch = [self.obstacles[j] for j in index]
+            normal[:, index] = cls.normals(batch, on_robot[:, index], on_obstacle[:, index])
+        return normal
 
     def _placements(self, qs: np.ndarray, jacobians: bool):
         """Frame rotations ``(K, P, 3, 3)`` and axis midpoints ``(K, P, 3)`` of the primitives
@@ -203,7 +228,7 @@ class CollisionModel:
         poses = np.empty((len(qs), len(frame_ids), 4, 4))
         jac = np.empty((len(qs), 6, self.robot.nv)) if jacobians else None
         for k, q in enumerate(qs):
-            if jacobians:
+            if jac is not None:
                 pin.computeJointJacobians(model, data, q)
                 pin.updateFramePlacements(model, data)
                 jac[k] = data.J
@@ -234,17 +259,16 @@ class CollisionModel:
         """True if every configuration of ``qs`` ``(K, nv)`` keeps ``clearance`` [m] from every
         obstacle, as :meth:`closest_many` measures it.
 
-        The axis bounds of :meth:`closest_many` decide most pairs without FCL: a primitive whose
-        axis midpoint is nearer than the clearance is too near, one whose whole axis is farther is
+        The shapes' distance bounds of :meth:`closest_many` decide most pairs without FCL: a pair
+        whose upper bound is below the clearance is too near, one whose lower bound is above it is
         clear. FCL measures only the pairs within :data:`_BOUND_SLACK` of the clearance or between
         the bounds, so the answer is the one that FCL's distances give.
         """
         rot, mid, _ = self._placements(qs, jacobians=False)
-        to_mid = np.linalg.norm(self._centers[None, None] - mid[:, :, None], axis=3)  # (K, P, O)
-        pad = self._prim_radii[:, None] + self._radii[None, :]
-        if (to_mid - pad).min() < clearance - _BOUND_SLACK:
+        lower, upper = self._bounds(rot, mid)  # (K, P, O)
+        if upper.min() < clearance - _BOUND_SLACK:
             return False
-        undecided = to_mid - 0.5 * self._prim_lengths[:, None] - pad < clearance + _BOUND_SLACK
+        undecided = lower < clearance + _BOUND_SLACK
         placed = None
         for k, i, j in zip(*(index.tolist() for index in np.nonzero(undecided))):
             if placed != (k, i):
@@ -278,12 +302,13 @@ def closest_approach(collision: CollisionModel, times: np.ndarray, qs: np.ndarra
     obstacles of ``collision`` (the index is in the list it was given; None: none in reach)."""
     if not collision.obstacles:
         return None
-    best = None
+    best: tuple[float, float, int, int] | None = None
     for t, q in zip(times, qs):
         d = collision.distances(q).distance
-        i, j = np.unravel_index(int(np.argmin(d)), d.shape)
-        if best is None or d[i, j] < best[0]:
-            best = (float(d[i, j]), float(t), i, j)
+        pair = np.unravel_index(int(np.argmin(d)), d.shape)
+        if best is None or d[pair] < best[0]:
+            best = (float(d[pair]), float(t), int(pair[0]), int(pair[1]))
+    assert best is not None  # times is not empty
     clearance, t, i, j = best
     name = collision.robot.primitives[collision.primitive_indices[i]].name
     return Approach(clearance, t, name, collision.given_index[j])
@@ -335,8 +360,14 @@ def _primitive_object(p) -> fcl.CollisionObject:
     return fcl.CollisionObject(fcl.Capsule(p.radius, p.length) if p.length > 0 else fcl.Sphere(p.radius))
 
 
-def _obstacle_object(o: SphereObstacle) -> fcl.CollisionObject:
-    return fcl.CollisionObject(fcl.Sphere(o.radius), fcl.Transform(np.asarray(o.center, dtype=float)))
+def _obstacle_object(o: Obstacle) -> fcl.CollisionObject:
+    return o.collision_object()
+
+
+def _bounding_gap(o: Obstacle) -> float:
+    """A lower bound on the distance [m] from the base origin to any point of ``o``."""
+    center, radius = o.bounding_sphere()
+    return float(np.linalg.norm(center)) - radius
 
 
 def _place(obj: fcl.CollisionObject, rot: np.ndarray, translation: np.ndarray) -> None:
@@ -348,26 +379,3 @@ def _place(obj: fcl.CollisionObject, rot: np.ndarray, translation: np.ndarray) -
 
 #: FCL only reads a request, so one serves every query.
 _NEAREST_POINTS = fcl.DistanceRequest(enable_nearest_points=True)
-
-
-def penetration(
-    mid: np.ndarray, axis: np.ndarray, length: float, radius: float, center: np.ndarray, obstacle_radius: float
-) -> tuple[float, np.ndarray, np.ndarray]:
-    """Signed distance [m] and witness points (on the primitive, on the obstacle) of a capsule
-    (axis midpoint ``mid``, unit ``axis``, ``length``, ``radius``; a sphere when ``length`` is 0)
-    and a sphere obstacle: the distance from the obstacle's centre to the capsule's axis segment,
-    less both radii.
-
-    Used for overlapping pairs, in closed form because both shapes are swept spheres: FCL's
-    signed-distance query (EPA) can abort the whole process near contact with a C++
-    ``std::logic_error`` that Python cannot catch (FCL issues #390, #445, #493; reproduced with
-    python-fcl 0.7 on a 0.1 m port sphere 4.5 mm inside a 0.35 m obstacle), and it does not
-    return for nearly concentric spheres.
-    """
-    mid, axis, center = (np.asarray(v, dtype=float) for v in (mid, axis, center))
-    along = float(np.clip((center - mid) @ axis, -0.5 * length, 0.5 * length))
-    core = mid + along * axis
-    offset = center - core
-    apart = float(np.linalg.norm(offset))
-    toward = offset / apart if apart > 0.0 else np.array([0.0, 0.0, 1.0])  # any direction on the axis
-    return apart - radius - obstacle_radius, core + radius * toward, center - obstacle_radius * toward

@@ -12,11 +12,11 @@ chain in catalogue order), in bounded memory.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from .assembly import assembly_error, count_assemblies, enumerate_assemblies
-from .catalog import Catalog, Module
+from .catalog import Catalog, Grammar, Module
 from .exceptions import CatalogError, CompositionError, shorten
 
 __all__ = ["Composition", "enumerate_compositions", "count_compositions"]
@@ -67,6 +67,7 @@ class Composition:
 
 def _check_grammar(name: str, modules: list[Module], catalog: Catalog) -> None:
     g = catalog.grammar
+    assert isinstance(g, Grammar), "a convention-A catalogue's grammar"
 
     def fail(message: str) -> CompositionError:
         return CompositionError(f"composition {shorten(name)}: {message} (catalogue {shorten(catalog.name)})")
@@ -90,7 +91,7 @@ def _check_grammar(name: str, modules: list[Module], catalog: Catalog) -> None:
         raise fail(f"has {dof} DOF; the grammar allows {g.dof[0]} to {g.dof[1]}")
 
 
-def _check_run(fail, run: int, after: str, g) -> None:
+def _check_run(fail: Callable[[str], CompositionError], run: int, after: str, g: Grammar) -> None:
     low, high = g.links_after_joint if after == "joint" else g.links_after_base
     if not low <= run <= high:
         raise fail(f"{run} link(s) after a {after}; the grammar allows {low} to {high}")
@@ -114,9 +115,10 @@ def enumerate_compositions(catalog: Catalog, dof: int | None = None) -> Iterator
     if catalog.general:
         _dof_range(catalog, dof)  # the same error for a DOF out of range
         for ids in enumerate_assemblies(catalog, dof):
-            yield Composition(ids, sum(catalog.module(i).dof for i in ids))
+            yield Composition(ids, sum(catalog.general_module(i).dof for i in ids))
         return
     g = catalog.grammar
+    assert isinstance(g, Grammar), "a convention-A catalogue's grammar"
     joints = catalog.of_kind("joint")
     blocks = [(j.id, *run) for j in joints for run in _link_runs(catalog.of_kind("link"), g.links_after_joint)]
     base_runs = _link_runs(catalog.of_kind("link"), g.links_after_base)
@@ -139,6 +141,7 @@ def count_compositions(catalog: Catalog, dof: int | None = None) -> dict[int, in
         _dof_range(catalog, dof)
         return count_assemblies(catalog, dof)
     g = catalog.grammar
+    assert isinstance(g, Grammar), "a convention-A catalogue's grammar"
     n_links = len(catalog.of_kind("link"))
     per_run = sum(n_links**k for k in range(g.links_after_joint[0], g.links_after_joint[1] + 1))
     per_base = sum(n_links**k for k in range(g.links_after_base[0], g.links_after_base[1] + 1))

@@ -10,6 +10,7 @@ __all__ = [
     "CatalogError",
     "ScenarioError",
     "CompositionError",
+    "ProblemError",
     "InfeasibleError",
     "ResultsFolderError",
     "FolderBusyError",
@@ -41,6 +42,12 @@ class ScenarioError(InputError):
 
 class CompositionError(InputError):
     """A composition does not exist in the catalogue or breaks its grammar."""
+
+
+class ProblemError(ModularRobotsError, ValueError):
+    """Step C was asked for something it cannot do: a problem whose boundary configurations are
+    outside the joint limits or in collision, an unknown cost, transcription or solver, a
+    setting out of range. (Infeasible candidates are results, not errors.)"""
 
 
 class InfeasibleError(ModularRobotsError):

@@ -36,7 +36,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Protocol, TypeVar
+from typing import Any, Protocol, TypedDict, TypeVar
 
 from threadpoolctl import ThreadpoolController, threadpool_limits
 
@@ -104,10 +104,19 @@ ENDING = (
     signal.SIGXCPU,
     signal.SIGALRM,
 )
+
+
+class _Ending(TypedDict):
+    signum: int | None
+    depth: int
+    arrivals: int | None
+    pid: int | None
+
+
 #: The first ending signal received within :func:`terminations_raise` (None: none yet), how many
 #: such blocks are open, the read end of the pipe the signals are written to as they arrive, and
 #: the process that set the handlers (a worker forked from it inherits them for a moment).
-_ending: dict[str, int | None] = {"signum": None, "depth": 0, "arrivals": None, "pid": None}
+_ending: _Ending = {"signum": None, "depth": 0, "arrivals": None, "pid": None}
 
 
 @contextlib.contextmanager
@@ -173,8 +182,11 @@ def _arrivals() -> Iterator[None]:
 
 def _first_arrived(signum: int) -> int:
     """The ending signal that arrived first (:func:`_arrivals`), ``signum`` if it cannot be told."""
-    with contextlib.suppress(OSError, TypeError):
-        for byte in os.read(_ending["arrivals"], 4096):
+    arrivals = _ending["arrivals"]
+    if arrivals is None:  # no pipe of ours (see _arrivals)
+        return signum
+    with contextlib.suppress(OSError):
+        for byte in os.read(arrivals, 4096):
             if byte in ENDING:
                 return byte
     return signum
@@ -260,7 +272,10 @@ def resolve_jobs(jobs: int | None = None) -> int:
 class Engine(Protocol):
     """Runs ``work(context, chunk)`` over chunks of ``items``; results come back in order."""
 
-    jobs: int
+    @property
+    def jobs(self) -> int:
+        """How many chunks run at once."""
+        ...
 
     def map_chunks(
         self, work: Callable[[Any, list[T]], list[R]], context: Any, items: Iterable[T], chunksize: int = 16

@@ -32,6 +32,7 @@ import math
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -144,6 +145,7 @@ class Verdict:
             "figures": self.figures,
         }
         if self.passed:
+            assert self.q_start is not None and self.q_goal is not None  # a passing verdict has them
             out.update(
                 q_start=list(self.q_start),
                 q_goal=list(self.q_goal),
@@ -186,7 +188,9 @@ def _reach_along(
         total += _piece_reach(offset, strokes)
         rotation, offset, strokes = np.eye(3), np.zeros(3), ()
     elif module.joint == "prismatic":
-        strokes = (*strokes, (rotation[:, 2].copy(), module.limits.lower, module.limits.upper))
+        limits = module.limits
+        assert limits is not None  # a movable module has limits
+        strokes = (*strokes, (rotation[:, 2].copy(), limits.lower, limits.upper))
     offset = offset + module.length * rotation[:, 2]
     return total, rotation @ _rx(module.twist_out), offset, strokes
 
@@ -266,10 +270,12 @@ def check_compositions(
         _reach_and_model(cascade, catalog, task, settings, targets)
     for label, target in targets.items():
         _at_target([c for c in cascades if c.verdict is None], label, target, settings)
+    verdicts = []
     for cascade in cascades:
         if cascade.verdict is None:
             cascade.verdict = _feasible(cascade)
-    return [cascade.verdict for cascade in cascades]
+        verdicts.append(cascade.verdict)
+    return verdicts
 
 
 @dataclass
@@ -290,6 +296,18 @@ class _Cascade:
 
     def fail(self, test: str, message: str) -> None:
         self.verdict = Verdict(self.composition, test, message, self.figures, self.clock.seconds)
+
+    def built(self) -> _Built:
+        """``robot``, ``collision`` and ``seeds``, which a cascade past the reach and workspace
+        tests has (every cascade :func:`_at_target` and :func:`_feasible` see)."""
+        assert self.robot is not None and self.collision is not None and self.seeds is not None
+        return _Built(self.robot, self.collision, self.seeds)
+
+
+class _Built(NamedTuple):
+    robot: RobotModel
+    collision: Callable[[], CollisionModel]
+    seeds: np.ndarray
 
 
 def _reach_and_model(
@@ -354,10 +372,12 @@ def _inside_workspace(
 def _at_target(cascades: list[_Cascade], label: str, target: np.ndarray, settings: FeasibilitySettings) -> None:
     """IK, static torque and collision at ``target`` for each of ``cascades``; one whose IK
     solutions all fail the other tests is searched again from more seeds before it fails."""
-    outcomes = _solve(cascades, label, target, [c.seeds for c in cascades], settings)
+    outcomes = _solve(cascades, label, target, [c.built().seeds for c in cascades], settings)
     if settings.escalation > 1:
         again = [i for i, outcome in enumerate(outcomes) if outcome.solutions and not outcome.kept]
-        more = [ik_seeds(cascades[i].robot, settings.seeds * settings.escalation)[settings.seeds :] for i in again]
+        more = [
+            ik_seeds(cascades[i].built().robot, settings.seeds * settings.escalation)[settings.seeds :] for i in again
+        ]
         found = _solve([cascades[i] for i in again], label, target, more, settings, [outcomes[i] for i in again])
         for i, outcome in zip(again, found):
             outcomes[i] = outcome
@@ -377,13 +397,13 @@ def _solve(
     distinct new solution (the ``earlier`` outcomes at the same target, if any, are extended)."""
     t0 = time.perf_counter()
     runs = solve_position_ik_batch(
-        [(cascade.robot, target, start) for cascade, start in zip(cascades, seeds)],
+        [(cascade.built().robot, target, start) for cascade, start in zip(cascades, seeds)],
         tolerance=settings.tolerance,
         max_iterations=settings.max_iterations,
     )
     _share(time.perf_counter() - t0, [cascade.clock for cascade in cascades], runs)
-    earlier = earlier or [None] * len(cascades)
-    return [_tests(cascade, label, found, settings, before) for cascade, found, before in zip(cascades, runs, earlier)]
+    befores: Sequence[_TargetOutcome | None] = earlier or [None] * len(cascades)
+    return [_tests(cascade, label, found, settings, before) for cascade, found, before in zip(cascades, runs, befores)]
 
 
 def _share(seconds: float, clocks: list[_Clock], runs: list[list[IKResult]]) -> None:
@@ -407,6 +427,7 @@ def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
     # the composition needs at least its best ratio at every target seen so far
     figures["torque_ratio"] = max(figures.get("torque_ratio", 0.0), outcome.best_ratio)
     if not outcome.kept:
+        assert outcome.closest is not None  # every solution was rejected, the closest recorded
         tests_passed, figure, message = outcome.closest
         if tests_passed:
             figures["clearance"] = figure  # of the configuration nearest to clearing the obstacles
@@ -418,7 +439,8 @@ def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
 def _feasible(cascade: _Cascade) -> Verdict:
     """The verdict of a composition that passes every test at every target, with its boundary
     configurations."""
-    robot, collision, figures = cascade.robot, cascade.collision(), cascade.figures
+    built = cascade.built()
+    robot, collision, figures = built.robot, built.collision(), cascade.figures
     (q_start, q_goal), clear = _boundary_pair(robot, collision, cascade.passing["start"], cascade.passing["goal"])
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
     figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
@@ -431,7 +453,7 @@ def _feasible(cascade: _Cascade) -> Verdict:
         tuple(map(float, q_start)),
         tuple(map(float, q_goal)),
         robot.travel_time_bound(q_start, q_goal),
-        tuple(tuple(map(float, q)) for q in clear) if clear else None,
+        (tuple(map(float, clear[0])), tuple(map(float, clear[1]))) if clear else None,
     )
 
 
@@ -449,7 +471,8 @@ def _tests(
 ) -> _TargetOutcome:
     """Torque and collision on every distinct new solution of the IK ``runs`` (the ``earlier``
     outcome at the same target, if any, is extended)."""
-    robot, clock = cascade.robot, cascade.clock
+    built, clock = cascade.built(), cascade.clock
+    robot = built.robot
     t0 = time.perf_counter()
     known = earlier.solutions if earlier else []
     solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
@@ -466,7 +489,7 @@ def _tests(
             outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
             continue
         t0 = time.perf_counter()
-        clear = _collision_check(cascade.collision(), q, label)
+        clear = _collision_check(built.collision(), q, label)
         clock.time(COLLISION.name, t0)
         if not clear.passed:
             outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))
@@ -626,12 +649,13 @@ class FeasibilitySummary:
         self.checked += 1
         for test, seconds in verdict.seconds.items():
             self.seconds[test] += seconds
-        if verdict.passed:
+        if verdict.failed_test is None:  # passed
             self.feasible += 1
             if self.keep is None:
                 self._kept.append(verdict)
             elif self.keep > 0:
                 # a max-heap on (time bound, input order): its root is the survivor to let go first
+                assert verdict.time_bound is not None  # a passing verdict has one
                 entry = (-verdict.time_bound, -self.feasible, verdict)
                 (heapq.heappush if len(self._kept) < self.keep else heapq.heappushpop)(self._kept, entry)
             return

@@ -23,6 +23,7 @@ import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Literal
 
 from .exceptions import FolderBusyError, ResultsFolderError, shorten
 
@@ -145,7 +146,7 @@ class ResultsFolder:
                     leftover.unlink()
         return self
 
-    def __exit__(self, *exc) -> bool:
+    def __exit__(self, *exc: object) -> Literal[False]:
         if self._fd is not None:
             with contextlib.suppress(OSError):
                 os.unlink(self.path / LOCK)

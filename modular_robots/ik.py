@@ -161,17 +161,21 @@ def _lockstep(
     problems: Sequence[IKProblem], tolerance: float, max_iterations: int, stall_iterations: int, stall_ratio: float
 ) -> list[list[IKResult]]:
     """The runs of ``problems`` (robots with as many joints) together, one row of ``q`` each."""
-    frames, starts, lower, upper, targets = [], [], [], [], []
+    frames: list[tuple[pin.Model, pin.Data, int]] = []
+    starts: list[np.ndarray] = []
+    lower_rows: list[np.ndarray] = []
+    upper_rows: list[np.ndarray] = []
+    target_rows: list[np.ndarray] = []
     for robot, target, seeds in problems:
         model = robot.model
         low, high = model.lowerPositionLimit, model.upperPositionLimit
         start = np.clip(np.asarray(seeds, dtype=float).reshape(-1, model.nq), low, high)
         frames += [(model, robot.data, robot.tool_frame_id)] * len(start)
         starts.append(start)
-        lower.append(np.broadcast_to(low, start.shape))
-        upper.append(np.broadcast_to(high, start.shape))
-        targets.append(np.broadcast_to(np.asarray(target, dtype=float), (len(start), 3)))
-    q, lower, upper, targets = (np.concatenate(rows) for rows in (starts, lower, upper, targets))
+        lower_rows.append(np.broadcast_to(low, start.shape))
+        upper_rows.append(np.broadcast_to(high, start.shape))
+        target_rows.append(np.broadcast_to(np.asarray(target, dtype=float), (len(start), 3)))
+    q, lower, upper, targets = (np.concatenate(rows) for rows in (starts, lower_rows, upper_rows, target_rows))
     count = len(q)
     best_q, best_error = list(q), [math.inf] * count
     since_best, iterations = [0] * count, [max_iterations] * count

@@ -232,7 +232,7 @@ def _pose(f: Fields, key: str) -> Pose:
     xyz = sub.vector("xyz", 3, IDENTITY_XYZ)
     rpy = sub.vector("rpy", 3, IDENTITY_XYZ)
     sub.done()
-    return Pose(tuple(xyz), tuple(rpy))
+    return Pose(xyz, rpy)
 
 
 def _shape(f: Fields) -> Shape:
@@ -247,8 +247,8 @@ def _shape(f: Fields) -> Shape:
 def _body(f: Fields) -> Body:
     body_id = _identifier(f, "id")
     mass = f.number("mass", default=0.0, minimum=0.0, maximum=MAX_MASS)
-    com = tuple(f.vector("com", 3, IDENTITY_XYZ))
-    inertia = tuple(f.vector("inertia", 6, (0.0,) * 6))
+    com = f.vector("com", 3, IDENTITY_XYZ)
+    inertia = f.vector("inertia", 6, (0.0,) * 6)
     if mass > 0.0:
         f.check(
             "inertia",

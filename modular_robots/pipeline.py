@@ -4,7 +4,7 @@ results folder (SPEC §2, §7). The ``run`` and ``optimize`` commands are thin s
 
 Data flows one way: step B's verdicts become :class:`~modular_robots.ocp.candidate.CandidateSpec`
 values (a composition and its boundary states), step C turns each into a
-:class:`~modular_robots.ocp.candidate.CandidateResult` that carries its sampled trajectory, and
+:class:`~modular_robots.plan.candidate.CandidateResult` that carries its sampled trajectory, and
 the :class:`~modular_robots.recorder.RunRecorder` writes what it is given.
 """
 
@@ -20,6 +20,7 @@ import numpy as np
 
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
+from .costs import COSTS
 from .exceptions import CompositionError, InfeasibleError, Terminated, shorten
 from .execution import ExecutionSettings, make_engine, make_executor, single_threaded_blas
 from .feasibility import (
@@ -31,9 +32,12 @@ from .feasibility import (
     composition_space,
     filter_compositions,
 )
-from .ocp.candidate import BoundaryPair, CandidateResult, CandidateSpec, CandidateStatus, make_candidate
+from .ocp.candidate import CandidateSpec, make_candidate
 from .ocp.solver import ITERATION_LIMIT, Iterate
-from .ocp.tracking import Tracking, track
+from .plan.boundary import BoundaryPair
+from .plan.candidate import CandidateResult, CandidateStatus
+from .plan.document import single_composition_counts, stage_counts, status_counts
+from .plan.tracking import Tracking, track
 from .pruning import Progress, PruningManager
 from .recorder import RunRecorder
 from .robot import robot_from_urdf, robot_model
@@ -91,6 +95,7 @@ def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
     fastest, and the fastest clear one when that is another pair; see
     :func:`~modular_robots.ocp.candidate.make_candidate`)."""
     for verdict in survivors:
+        assert verdict.q_start is not None and verdict.q_goal is not None  # a survivor has its boundary pair
         yield CandidateSpec(verdict.composition, verdict.q_start, verdict.q_goal, BoundaryPair.FASTEST)
         if verdict.clear_pair is not None:
             yield CandidateSpec(verdict.composition, *verdict.clear_pair, BoundaryPair.CLEAR)
@@ -98,24 +103,17 @@ def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
 
 def cost_bound(scenario: Scenario, spec: CandidateSpec) -> float:
     """The lower bound on ``spec``'s optimal cost before it is optimised, the one its problem will
-    have (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`): for ``time``, its
-    busiest joint at the plan's velocity bound all the way; 0 for ``effort``."""
-    if scenario.task.cost != "time":
-        return 0.0
+    have (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`): the task's cost's
+    :meth:`~modular_robots.costs.Cost.lower_bound` at the plan's velocity bounds."""
     robot = robot_model(spec.composition, scenario.catalog, scenario.task.payload)
-    return robot.travel_time_bound(spec.q_start, spec.q_goal, scenario.optimizer.velocity_margin * robot.velocity_limit)
+    velocity_bound = scenario.optimizer.velocity_margin * robot.velocity_limit
+    q_start, q_goal = np.asarray(spec.q_start, dtype=float), np.asarray(spec.q_goal, dtype=float)
+    return COSTS[scenario.task.cost].lower_bound(robot, q_start, q_goal, velocity_bound)
 
 
 def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
     optimal = [r for r in results if r.status == CandidateStatus.OPTIMAL]
     return min(optimal, key=lambda r: (r.cost, r.name)) if optimal else None
-
-
-def _status_counts(results: Iterable[CandidateResult]) -> dict[str, int]:
-    """Candidates per status; ``stopped``: not started, or closed before they ended (while a run
-    goes on, and after an interruption or an error)."""
-    statuses = [r.status for r in results]
-    return {str(s): statuses.count(s) for s in CandidateStatus}
 
 
 def run_scenario(
@@ -181,15 +179,15 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
         specs = sorted(candidate_specs(survivors), key=lambda spec: (bounds[spec.name], spec.name))
         optimization_start = time.perf_counter()
         rounds = 0
-        manager = None
+        manager: PruningManager | None = None
 
         def record(every: float = 0.0) -> list[CandidateResult]:
-            done = manager.results if manager is not None else {}
+            done: dict[str, CandidateResult] = manager.results if manager is not None else {}
             results = [
                 _labelled(done.get(spec.name) or CandidateResult.never_started(spec.name), spec) for spec in specs
             ]
             recorder.update(
-                counts=_status_counts(results),
+                counts=status_counts(results),
                 results=results,
                 every=every,
                 seconds={"optimization": time.perf_counter() - optimization_start},
@@ -201,7 +199,7 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
         )
         try:  # from here on, any ending stops the workers and records every candidate
             manager = PruningManager(executor, scenario.pruning, bounds=bounds)
-            recorder.update(counts={"optimized": len(survivors), "candidates": len(specs)})
+            recorder.update(counts=stage_counts(len(survivors), len(specs)))
             for progress in manager.rounds():
                 rounds = progress.round
                 notify("optimization", _progress_figures(progress, len(specs)))
@@ -264,14 +262,14 @@ def optimize_composition(
     candidates = [make_candidate(scenario, spec) for spec in specs]
     with RunRecorder(out, scenario, rule="single composition") as recorder:
         recorder.update(
-            counts={"enumerated": 1, "feasible": 1, "optimized": 1, "candidates": len(candidates)},
+            counts=single_composition_counts(len(candidates)),
             seconds={"feasibility": time.perf_counter() - start},
         )
 
         def record() -> list[CandidateResult]:
             results = [c.result for c in candidates if c.result is not None]
             recorder.update(
-                counts=_status_counts(results),
+                counts=status_counts(results),
                 results=results,
                 seconds={"optimization": sum(c.seconds for c in candidates)},
             )
@@ -322,17 +320,21 @@ def winner_approach(result: CandidateResult, scenario: Scenario, samples: int = 
     trajectory (:func:`~modular_robots.collision.closest_approach`); None without obstacles."""
     if not scenario.task.obstacles:
         return None
+    trajectory = result.trajectory
+    assert trajectory is not None  # an optimal result carries its plan
     composition = Composition.from_name(result.composition or result.name, scenario.catalog)
     robot = robot_model(composition, scenario.catalog, scenario.task.payload)
-    times = np.linspace(0.0, float(result.trajectory.t[-1]), samples)
+    times = np.linspace(0.0, float(trajectory.t[-1]), samples)
     collision = CollisionModel(robot, scenario.task.obstacles)
-    return closest_approach(collision, times, result.trajectory.at(times)[0])
+    return closest_approach(collision, times, trajectory.at(times)[0])
 
 
 def track_winner(result: CandidateResult) -> Tracking:
     """The closed-loop check of an optimal result's plan on its exported URDF and drives
-    (:func:`~modular_robots.ocp.tracking.track`)."""
-    return track(robot_from_urdf(result.urdf, result.drive["armature"]), result.trajectory)
+    (:func:`~modular_robots.plan.tracking.track`)."""
+    urdf, drive, trajectory = result.urdf, result.drive, result.trajectory
+    assert urdf is not None and drive is not None and trajectory is not None  # an optimal result has all three
+    return track(robot_from_urdf(urdf, drive["armature"]), trajectory)
 
 
 def _progress_figures(progress: Progress, total: int) -> dict:
@@ -359,5 +361,9 @@ def with_execution(scenario: Scenario, engine: str | None = None, address: str |
 
 def with_pruning(scenario: Scenario, rule: str | None = None, threshold: float | None = None) -> Scenario:
     """``scenario`` with its pruning rule and/or threshold overridden."""
-    overrides = {k: v for k, v in (("rule", rule), ("threshold", threshold)) if v is not None}
-    return replace(scenario, pruning=replace(scenario.pruning, **overrides)) if overrides else scenario
+    if rule is None and threshold is None:
+        return scenario
+    pruning = scenario.pruning
+    rule = pruning.rule if rule is None else rule
+    threshold = pruning.threshold if threshold is None else threshold
+    return replace(scenario, pruning=replace(pruning, rule=rule, threshold=threshold))

@@ -32,6 +32,7 @@ import os
 import signal
 import threading
 import uuid
+import warnings
 from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -43,15 +44,31 @@ from .execution import ENDING, InProcessExecutor, Lost, _chunks
 
 try:
     import ray
-    from ray._private import ray_constants
 except ImportError:  # said when the engine is chosen (_require)
-    ray = ray_constants = None
+    ray = None  # type: ignore[assignment]  # optional: every use follows _require()
+try:  # a private Ray module (start_local's switch): without it, start_local sets the variable only
+    from ray._private import ray_constants
+except ImportError:
+    ray_constants = None  # type: ignore[assignment]
 
-__all__ = ["RayEngine", "RayExecutor", "connect", "start_local", "disconnect", "STOP_SECONDS"]
+__all__ = [
+    "RayEngine",
+    "RayExecutor",
+    "connect",
+    "start_local",
+    "disconnect",
+    "STOP_SECONDS",
+    "RayPrivateNameWarning",
+]
 
 #: How long stopping a candidate waits for its actor to finish the iteration it is in [s]; an
 #: actor that does not answer by then is killed and its candidate recorded as stopped.
 STOP_SECONDS = 60.0
+
+
+class RayPrivateNameWarning(UserWarning):
+    """A private Ray name the engine uses is not there: the engine does without it (see the message)."""
+
 
 #: Whether this process started the Ray instance it is connected to (then it shuts it down).
 _session = {"started": False}
@@ -106,16 +123,23 @@ def start_local(cpus: int) -> None:
 
     Ray binds a node to the machine's network address unless told it is not a cluster
     (``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``, which its processes inherit; a cluster of several
-    machines is started with ``ray start`` and reached with an address instead)."""
+    machines is started with ``ray start`` and reached with an address instead).
+
+    This process read that variable when it imported Ray, so its switch is set too: Ray's private
+    ``ray._private.ray_constants.ENABLE_RAY_CLUSTER``. A Ray without it gets the variable only,
+    with a :class:`RayPrivateNameWarning`."""
     _require()
-    previous = (os.environ.get(_CLUSTER_VARIABLE), ray_constants.ENABLE_RAY_CLUSTER)
+    constants = _cluster_switch()
+    previous = (os.environ.get(_CLUSTER_VARIABLE), constants.ENABLE_RAY_CLUSTER if constants else None)
     os.environ[_CLUSTER_VARIABLE] = "0"
-    ray_constants.ENABLE_RAY_CLUSTER = False
+    if constants is not None:
+        constants.ENABLE_RAY_CLUSTER = False
     try:
         with _signals_kept():
             ray.init(address="local", num_cpus=cpus, include_dashboard=False, logging_level=logging.WARNING)
     finally:
-        ray_constants.ENABLE_RAY_CLUSTER = previous[1]
+        if constants is not None:
+            constants.ENABLE_RAY_CLUSTER = previous[1]
         if previous[0] is None:
             os.environ.pop(_CLUSTER_VARIABLE, None)
         else:
@@ -124,6 +148,21 @@ def start_local(cpus: int) -> None:
 
 #: The variable that keeps a Ray node on the loopback address (see :func:`start_local`).
 _CLUSTER_VARIABLE = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
+def _cluster_switch():
+    """Ray's private ``ray_constants`` module if it has the switch :func:`start_local` sets, else
+    None with a :class:`RayPrivateNameWarning`."""
+    if ray_constants is not None and isinstance(getattr(ray_constants, "ENABLE_RAY_CLUSTER", None), bool):
+        return ray_constants
+    warnings.warn(
+        f"Ray {getattr(ray, '__version__', '?')} has no ray._private.ray_constants.ENABLE_RAY_CLUSTER: the local "
+        f"Ray instance is started with {_CLUSTER_VARIABLE}=0 only, which its worker processes read; this process "
+        "may report the machine's network address as the node's instead of the loopback address",
+        RayPrivateNameWarning,
+        stacklevel=3,
+    )
+    return None
 
 
 def disconnect() -> None:
@@ -314,7 +353,7 @@ class RayExecutor:
 
     def stop(self, names):
         calls = {name: self._actors[name].stop.remote() for name in names if name in self._actors}
-        out = {}
+        out: dict[str, Any] = {}
         try:
             for name in names:
                 out[name] = None

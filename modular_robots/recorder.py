@@ -12,32 +12,34 @@ when it starts, so the folder holds only the files of the run its ``result.json`
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import replace
 from pathlib import Path
-
-import numpy as np
+from typing import Literal
 
 from .collision import Approach
 from .exceptions import ResultsFolderError, Terminated, shorten
 from .execution import terminations_raise
 from .folder import ResultsFolder, atomic_write
-from .ocp.candidate import CandidateResult
-from .ocp.tracking import Tracking
-from .ocp.trajectory import Trajectory
-from .ocp.verification import Verification
-from .report import RESULT, WINNER_FILES, is_export, write_pruning_plot, write_winner_files
+from .plan.candidate import CandidateResult
+from .plan.document import (
+    RESULT,
+    STATUSES,
+    named_winner_files,
+    result_json,
+    result_text,
+    settings_json,
+    winner_json,
+)
+from .plan.records import WinnerFiles
+from .plan.tracking import Tracking
+from .report import WINNER_FILES, is_export, write_pruning_plot, write_winner_files
 from .scenario import Scenario
 from .viewer import VIEWER, write_page
 
 __all__ = ["RunRecorder", "RESULT", "STATUSES", "previous_files"]
-
-#: ``running`` until the run ends; then ``done``, ``infeasible`` (no composition passes step B),
-#: ``failed`` (no candidate verified, or an error), or ``interrupted``.
-STATUSES = ("running", "done", "infeasible", "failed", "interrupted")
 
 
 class RunRecorder:
@@ -65,13 +67,7 @@ class RunRecorder:
         self._folder = ResultsFolder(self.path) if self.path is not None else None
         self._exits = contextlib.ExitStack()
         self.scenario = scenario
-        self.settings = {
-            "optimizer": asdict(scenario.optimizer),
-            "pruning": asdict(scenario.pruning),
-            "cost": scenario.task.cost,
-            "payload": scenario.task.payload,
-            **settings,
-        }
+        self.settings = settings_json(scenario, **settings)
         self.status, self.message = "running", ""
         self.counts: dict = {}
         self.seconds: dict[str, float] = {}
@@ -85,14 +81,14 @@ class RunRecorder:
         with contextlib.ExitStack() as stack:
             if self._folder is not None:
                 stack.enter_context(self._folder)
-                self._folder.remove(previous_files(self.path))
-                _check_replaceable(self.path)
+                self._folder.remove(previous_files(self._folder.path))
+                _check_replaceable(self._folder.path)
             stack.enter_context(terminations_raise())
             self._write()
             self._exits = stack.pop_all()
         return self
 
-    def __exit__(self, kind, exc, traceback) -> bool:
+    def __exit__(self, kind, exc, traceback) -> Literal[False]:
         try:
             if kind is not None and self.status == "running":
                 if issubclass(kind, Terminated):
@@ -133,25 +129,27 @@ class RunRecorder:
         document; return the files' names. ``pruning_plot_title``: also plot every candidate's
         history; ``tracking``: the closed-loop check of its plan; ``approach``: where it comes
         closest to an obstacle."""
-        files = {}
+        files = WinnerFiles()
         if self.path is not None:
             start = time.perf_counter()
             before = _identities(self.path, (*WINNER_FILES, VIEWER))
             try:
                 files = write_winner_files(self.path, winner)
                 if pruning_plot_title is not None:
-                    files["pruning_plot"] = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
-                self.winner = _winner_json(winner, files, tracking, approach)
+                    plot = write_pruning_plot(self.path, self.results, winner.name, pruning_plot_title)
+                    files = replace(files, pruning_plot=plot)
+                self.winner = winner_json(winner, files, tracking, approach)
                 self._write()  # the page is drawn from the folder's files, result.json included
-                files["viewer"] = write_page(self.path)
+                files = replace(files, viewer=write_page(self.path))
             except BaseException:  # no winner file without a result.json that names it
+                assert self._folder is not None  # made whenever self.path is given
                 self.winner = None
                 after = _identities(self.path, before)
                 self._folder.remove(name for name in before if after[name] != before[name])  # what we wrote
                 raise
             self.seconds["report"] = time.perf_counter() - start
-        self.winner = _winner_json(winner, files, tracking, approach)
-        return files
+        self.winner = winner_json(winner, files, tracking, approach)
+        return files.by_kind()
 
     def finish(self, status: str, message: str = "") -> None:
         """End the run with ``status`` (one of :data:`STATUSES`) and rewrite the document."""
@@ -173,52 +171,35 @@ class RunRecorder:
             self.finish(status, message)
         except OSError as exc:
             self.status, self.message = status, f"{message}; result.json cut short: {_describe(exc)}"
-            with contextlib.suppress(OSError):
-                _overwrite(self.path / RESULT, json.dumps(self.summary(), indent=1) + "\n")
+            if self.path is not None:  # always: without a folder nothing is written, nothing fails
+                with contextlib.suppress(OSError):
+                    _overwrite(self.path / RESULT, result_text(self.summary(), allow_nan=True))
 
     # -- the document -----------------------------------------------------------------------------
-    def document(self) -> dict:
+    def document(self, short: bool = False) -> dict:
         """``result.json`` as it stands (SPEC §7); ``partial`` is true until the run has finished
-        (and stays true for an interrupted one)."""
-        return {
-            "scenario": self.scenario.name,
-            "scenario_file": str(self.scenario.path) if self.scenario.path else None,
-            "status": self.status,
-            "partial": self.status in ("running", "interrupted"),
-            "message": self.message,
-            "settings": self.settings,
-            "task": _task_json(self.scenario),
-            "counts": self.counts,
-            "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
-            "candidates": [r.to_json() for r in self.results],
-            "winner": self.winner,
-            "totals": {
-                "optimizer_iterations": int(sum(r.iterations for r in self.results)),
-                "wall_seconds": round(time.perf_counter() - self._start, 3),
-            },
-        }
+        (and stays true for an interrupted one). ``short``: :meth:`summary`."""
+        return result_json(
+            self.scenario,
+            status=self.status,
+            message=self.message,
+            settings=self.settings,
+            counts=self.counts,
+            seconds=self.seconds,
+            results=self.results,
+            winner=self.winner,
+            wall_seconds=time.perf_counter() - self._start,
+            short=short,
+        )
 
     def summary(self) -> dict:
         """The document without the candidates' histories (what fits where nothing else does)."""
-        document = self.document()
-        document["candidates"] = [{"candidate": r.name, "status": str(r.status)} for r in self.results]
-        return document
+        return self.document(short=True)
 
     def _write(self) -> None:
         self._last_write = time.perf_counter()
         if self.path is not None:
-            atomic_write(self.path / RESULT, json.dumps(self.document(), indent=1, allow_nan=False) + "\n")
-
-
-def _task_json(scenario: Scenario) -> dict:
-    task = scenario.task
-    return {
-        "payload": task.payload,
-        "start": list(task.start),
-        "goal": list(task.goal),
-        "obstacles": [{"center": list(o.center), "radius": o.radius} for o in task.obstacles],
-        "cost": task.cost,
-    }
+            atomic_write(self.path / RESULT, result_text(self.document()))
 
 
 def previous_files(folder: Path) -> list[str]:
@@ -229,15 +210,7 @@ def previous_files(folder: Path) -> list[str]:
     a folder of the user's keeps its ``joints.png``, and a forged ``result.json`` that names
     ``.lock`` or a user's file has it ignored.
     """
-    try:
-        document = json.loads((folder / RESULT).read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError):  # missing, unreadable, not JSON (or not UTF-8)
-        return []
-    if not isinstance(document, dict) or document.get("status") not in STATUSES or "settings" not in document:
-        return []
-    winner = document.get("winner")
-    files = winner.get("files") if isinstance(winner, dict) else None
-    named = {n for n in files.values() if isinstance(n, str)} if isinstance(files, dict) else set()
+    named = named_winner_files(folder)
     names = [n for n in (*WINNER_FILES, VIEWER) if n in named]
     if names:
         with contextlib.suppress(OSError):
@@ -259,7 +232,7 @@ def _check_replaceable(folder: Path) -> None:
 
 def _identities(folder: Path, names) -> dict[str, tuple[int, int] | None]:
     """Each file's (device, inode), None if missing: a file replaced or created since differs."""
-    out = {}
+    out: dict[str, tuple[int, int] | None] = {}
     for name in names:
         try:
             info = os.stat(folder / name, follow_symlinks=False)
@@ -284,41 +257,3 @@ def _describe(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.strerror:
         return f"{exc.strerror}" + (f": {exc.filename}" if exc.filename else "")
     return str(exc) or type(exc).__name__
-
-
-def _winner_json(
-    result: CandidateResult, files: dict, tracking: Tracking | None, approach: Approach | None = None
-) -> dict:
-    trajectory = result.trajectory
-    return {
-        "composition": result.composition or result.name,
-        "candidate": result.name,
-        "boundary_pair": str(result.boundary_pair),
-        "dof": result.dof,
-        "cost": result.cost,
-        "tf": result.tf,
-        "iterations": result.iterations,
-        "seconds": round(result.seconds, 4),
-        "substeps": result.substeps,
-        "verification": result.verification.to_json() if result.verification else None,
-        "limits_used": _limits_used(trajectory, result.verification) if trajectory is not None else None,
-        "tracking": tracking.to_json() if tracking is not None else None,
-        "closest_approach": approach.to_json() if approach is not None else None,
-        "drive": result.drive,
-        "files": files,
-    }
-
-
-def _limits_used(trajectory: Trajectory, verification: Verification | None) -> dict:
-    """Per joint, the largest share of its effort and velocity limit the plan uses: at its rows
-    and, where verification measured it, on its dense grid between them."""
-
-    def share(values, limit, dense):
-        rows = np.max(np.abs(values), axis=0) / np.where(limit > 0, limit, np.inf)
-        return [float(v) for v in (np.maximum(rows, dense) if len(dense) == len(rows) else rows)]
-
-    effort, velocity = (verification.effort_share, verification.velocity_share) if verification else ((), ())
-    return {
-        "effort": share(trajectory.tau, trajectory.effort_limit, effort),
-        "velocity": share(trajectory.qd, trajectory.velocity_limit, velocity),
-    }

@@ -17,8 +17,11 @@ import numpy as np
 
 from .exceptions import InputError, shorten
 from .folder import ResultsFolder, atomic_path, atomic_write
-from .ocp.candidate import CandidateResult, CandidateStatus
-from .ocp.trajectory import Trajectory, controller_rate, joint_trajectory
+from .plan.candidate import CandidateResult, CandidateStatus
+from .plan.document import RESULT as RESULT
+from .plan.document import read_document, winner_armature, winner_plan_files
+from .plan.records import ResultDocument, WinnerFiles
+from .plan.trajectory import Trajectory, controller_rate, joint_trajectory
 from .robot import RobotModel, robot_from_urdf
 
 __all__ = [
@@ -37,7 +40,6 @@ __all__ = [
     "WINNER_FILES",
 ]
 
-RESULT = "result.json"
 URDF = "winner.urdf"
 TRAJECTORY = "trajectory.csv"
 JOINTS_PLOT = "joints.png"
@@ -62,9 +64,9 @@ def is_export(name: str) -> bool:
     return name == JOINT_TRAJECTORY or _EXPORT.fullmatch(name) is not None
 
 
-def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -> dict[str, str]:
+def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -> WinnerFiles:
     """Write ``winner.urdf``, ``trajectory.csv`` and the joints plot of an optimal ``result`` into
-    ``folder``; return their names by kind.
+    ``folder``; return their names.
 
     Raises
     ------
@@ -74,16 +76,12 @@ def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -
     if result.trajectory is None:
         raise ValueError(f"{result.name}: a {result.status} result has no trajectory to write")
     folder = Path(folder)
-    files = {}
     if result.urdf is not None:
         atomic_write(folder / URDF, result.urdf)
-        files["urdf"] = URDF
     with atomic_path(folder / TRAJECTORY) as tmp:
         result.trajectory.write_csv(tmp)
-    files["trajectory"] = TRAJECTORY
     plot_joints(result.trajectory, folder / JOINTS_PLOT, title or result.name)
-    files["joints_plot"] = JOINTS_PLOT
-    return files
+    return WinnerFiles(urdf=URDF if result.urdf is not None else None, trajectory=TRAJECTORY, joints_plot=JOINTS_PLOT)
 
 
 def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str, Path]:
@@ -92,7 +90,7 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     The plan is read from ``trajectory.csv``, whose acceleration contract defines the motion
     exactly between its rows, so the new rows are the plan's own values, not an interpolation;
     torques come from the inverse dynamics of ``winner.urdf`` with the drives of ``result.json``
-    (:func:`~modular_robots.ocp.trajectory.controller_rate`). Writes
+    (:func:`~modular_robots.plan.trajectory.controller_rate`). Writes
     ``trajectory_<rate>hz.csv`` (:func:`export_name`; no ``qdd`` columns: the zero-order-hold
     contract of SPEC §7) and ``trajectory.json`` (ROS ``trajectory_msgs/JointTrajectory``);
     returns their paths. The folder is locked meanwhile, so a run cannot start into it.
@@ -101,7 +99,7 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     ------
     InputError
         If the folder has no winner to export, or the plan at ``rate`` would have more than
-        :data:`~modular_robots.ocp.trajectory.MAX_ROWS` rows.
+        :data:`~modular_robots.plan.trajectory.MAX_ROWS` rows.
     FolderBusyError
         If a run is writing into the folder.
     """
@@ -121,7 +119,7 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     return {"csv": csv_path, "json": json_path}
 
 
-def winner_robot(folder: Path, document: dict, urdf: str, trajectory: Trajectory) -> RobotModel:
+def winner_robot(folder: Path, document: ResultDocument, urdf: str, trajectory: Trajectory) -> RobotModel:
     """The model of a results folder's winner (:func:`read_winner`'s parts), with its drives'
     armature: for the export's torques and the page's poses, which refuse the same damage alike.
 
@@ -131,30 +129,18 @@ def winner_robot(folder: Path, document: dict, urdf: str, trajectory: Trajectory
         If ``winner.urdf`` is not a loadable URDF, ``winner.drive.armature`` is not one number
         per joint, or the URDF's joints are not the trajectory's.
     """
-    path = Path(folder) / document["winner"]["files"]["urdf"]
+    path = winner_plan_files(document, Path(folder))[0]
     try:
         robot = robot_from_urdf(urdf)
     except (ValueError, RuntimeError, TypeError) as exc:
         raise InputError(f"{path}: expected the URDF a run writes ({shorten(exc, 120, quote=False)})") from None
     if robot.nv != trajectory.nv:
         raise InputError(f"{path}: expected {trajectory.nv} joints (as in the trajectory), got {robot.nv}")
-    drive = document["winner"].get("drive")
-    armature = drive.get("armature") if isinstance(drive, dict) else None
-    if armature is None:
-        return robot
-    if (
-        not isinstance(armature, list)
-        or len(armature) != robot.nv
-        or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0.0 <= a < 1e9 for a in armature)
-    ):
-        raise InputError(
-            f"{Path(folder) / RESULT}: winner.drive.armature: expected {robot.nv} numbers >= 0 (one per joint), "
-            f"got {shorten(armature)}"
-        )
-    return robot_from_urdf(urdf, armature)
+    armature = winner_armature(document, robot.nv)
+    return robot if armature is None else robot_from_urdf(urdf, armature)
 
 
-def read_winner(folder: str | Path) -> tuple[dict, str, Trajectory]:
+def read_winner(folder: str | Path) -> tuple[ResultDocument, str, Trajectory]:
     """``(result.json's document, winner.urdf's text, the trajectory)`` of the results folder
     ``folder``, for what is made from a finished run (``export``, ``view``).
 
@@ -162,28 +148,16 @@ def read_winner(folder: str | Path) -> tuple[dict, str, Trajectory]:
     ------
     InputError
         Naming the file and what is wrong: no or unreadable ``result.json``, no winner (with the
-        run's status), a missing winner file, or a ``trajectory.csv`` that breaks its contract.
+        run's status), a value of the document of the wrong type or out of range
+        (:func:`~modular_robots.plan.document.read_document`), a missing winner file, or a
+        ``trajectory.csv`` that breaks its contract.
     """
     folder = Path(folder)
-    path = folder / RESULT
+    document = read_document(folder, require_winner=True)
+    urdf_path, trajectory_path = winner_plan_files(document, folder)
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{folder}: no {RESULT}; expected the results folder of a run") from None
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise InputError(f"{path}: expected the JSON a run writes ({shorten(exc, 120, quote=False)})") from None
-    winner = document.get("winner") if isinstance(document, dict) else None
-    if not isinstance(winner, dict):
-        status = document.get("status") if isinstance(document, dict) else None
-        raise InputError(f"{path}: no winner to read (the run's status is {status!r})")
-    files = winner.get("files") if isinstance(winner.get("files"), dict) else {}
-    names = {kind: files.get(kind) for kind in ("urdf", "trajectory")}
-    for kind, name in names.items():
-        if not isinstance(name, str) or not name or "/" in name or not (folder / name).is_file():
-            raise InputError(f"{path}: winner.files.{kind}: expected a file of this folder, got {shorten(name)}")
-    try:
-        urdf = (folder / names["urdf"]).read_text(encoding="utf-8")
-        trajectory = Trajectory.read_csv(folder / names["trajectory"])
+        urdf = urdf_path.read_text(encoding="utf-8")
+        trajectory = Trajectory.read_csv(trajectory_path)
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{folder}: cannot read the winner's files ({shorten(exc, 120, quote=False)})") from None
     except ValueError as exc:
@@ -222,7 +196,11 @@ def plot_joints(trajectory: Trajectory, path: Path, title: str = "") -> None:
         for i in range(values.shape[1]):
             (line,) = ax.plot(trajectory.t, values[:, i], label=f"joint {i + 1}", drawstyle=drawstyle)
             for level, style in ((limit, "--"), (bound, ":")):
-                if level is not None and np.isfinite(level[i]) and (style == "--" or level[i] != limit[i]):
+                if (
+                    level is not None
+                    and np.isfinite(level[i])
+                    and (style == "--" or limit is None or level[i] != limit[i])
+                ):
                     ax.axhline(level[i], color=line.get_color(), ls=style, lw=0.7)
                     ax.axhline(-level[i], color=line.get_color(), ls=style, lw=0.7)
         ax.set_ylabel(label)

@@ -303,7 +303,7 @@ def robot_model(composition: Composition, catalog: Catalog, payload: float = 0.0
 def _pinocchio_model(composition: Composition, catalog: Catalog, payload: float) -> tuple[pin.Model, str]:
     model = pin.buildModelFromXML(composition_urdf(composition, catalog, payload, collision=False))
     if catalog.general:
-        joints = [j for m in composition.modules for j in catalog.module(m).joints]
+        joints = [j for m in composition.modules for j in catalog.general_module(m).joints]
         model.armature = np.array([j.drive.armature for j in joints], dtype=float)
         return model, composition_urdf(composition, catalog, payload)
     joint_modules = [catalog.module(m) for m in composition.modules if catalog.module(m).dof]

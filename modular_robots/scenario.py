@@ -9,10 +9,13 @@ from pathlib import Path
 
 from ._yamlio import Fields, load_yaml
 from .catalog import Catalog, catalog_from_fields, load_catalog
+from .costs import COSTS
 from .exceptions import InputError, ScenarioError, shorten
 from .execution import ENGINES, ExecutionSettings
+from .obstacles import Obstacle, SphereObstacle, obstacle_from_fields
 
 __all__ = [
+    "Obstacle",
     "SphereObstacle",
     "Task",
     "OptimizerSettings",
@@ -22,10 +25,11 @@ __all__ = [
     "load_scenario",
 ]
 
-COSTS = ("time", "effort")
 RULES = ("ratio", "paper", "none")
 REFERENCES = ("trusted", "verified")
 TRANSCRIPTIONS = ("forward", "inverse")
+#: Step C's solvers by name (:data:`modular_robots.ocp.solvers.SOLVERS` holds them).
+SOLVERS = ("trust-constr",)
 #: A scenario's name is its results folder's default name: one safe path component.
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 #: The shortest start-goal distance of a task [m]: closer, there is no motion to optimise.
@@ -42,14 +46,6 @@ _LOOSE = "looser, the solver stops before the plan keeps its constraints and mar
 
 
 @dataclass(frozen=True)
-class SphereObstacle:
-    """A sphere obstacle: ``center`` in the base frame [m], ``radius`` [m]."""
-
-    center: tuple[float, float, float]
-    radius: float
-
-
-@dataclass(frozen=True)
 class Task:
     """Carry ``payload`` [kg] from tool position ``start`` to ``goal`` [m, base frame], at rest at
     both ends, clear of ``obstacles``, minimising ``cost`` (``time`` or ``effort``)."""
@@ -57,7 +53,7 @@ class Task:
     payload: float
     start: tuple[float, float, float]
     goal: tuple[float, float, float]
-    obstacles: tuple[SphereObstacle, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
     cost: str = "time"
     self_collision: bool = False
 
@@ -83,6 +79,8 @@ class OptimizerSettings:
     clearance_margin: float = 0.02
     effort_margin: float = 0.9
     velocity_margin: float = 0.95
+    #: The solver of step C, by name (:data:`SOLVERS`).
+    solver: str = "trust-constr"
 
 
 @dataclass(frozen=True)
@@ -184,24 +182,17 @@ def _read_task(f: Fields) -> Task:
     )
     obstacles = []
     for item in f.mappings("obstacles", default=()):
-        if not item.has("sphere"):  # another shape (box: ...) is an unknown key, not a missing sphere
-            item.raw("sphere", None)
-            item.done()
-        sphere = item.mapping("sphere")
-        center = sphere.vector("center", 3)
-        radius = sphere.number("radius", exclusive_minimum=0.0)
-        sphere.done()
-        item.done()
-        if math.dist(center, (0.0, 0.0, 0.0)) <= radius:
+        obstacle = obstacle_from_fields(item)
+        if obstacle.contains((0.0, 0.0, 0.0)):
             raise item.fail(
-                "sphere",
-                f"the obstacle contains the robot's base at the origin (centre {list(center)}, radius {radius:g})",
+                obstacle.kind,
+                f"the obstacle contains the robot's base at the origin ({obstacle.describe()})",
             )
         for label, point in (("start", start), ("goal", goal)):
-            if math.dist(center, point) <= radius:
-                raise item.fail("sphere", f"the obstacle contains the {label} position {list(point)}")
-        obstacles.append(SphereObstacle(center, radius))
-    cost = f.string("cost", default="time", choices=COSTS)
+            if obstacle.contains(point):
+                raise item.fail(obstacle.kind, f"the obstacle contains the {label} position {list(point)}")
+        obstacles.append(obstacle)
+    cost = f.string("cost", default="time", choices=tuple(COSTS))
     self_collision = f.boolean("self_collision", default=False)
     if self_collision:
         raise f.fail(
@@ -235,6 +226,7 @@ def _read_optimizer(f: Fields | None) -> OptimizerSettings:
         clearance_margin=f.number("clearance_margin", default=d.clearance_margin, minimum=0.0, maximum=1.0),
         effort_margin=f.number("effort_margin", default=d.effort_margin, exclusive_minimum=0.0, maximum=1.0),
         velocity_margin=f.number("velocity_margin", default=d.velocity_margin, exclusive_minimum=0.0, maximum=1.0),
+        solver=f.string("solver", default=d.solver, choices=SOLVERS),
     )
     f.done()
     return settings

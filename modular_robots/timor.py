@@ -61,7 +61,7 @@ def _pose(matrix) -> dict:
     return {"xyz": [float(x) for x in m[:3, 3]], "rpy": [float(x) for x in rpy_from_matrix(m[:3, :3])]}
 
 
-def _posed(pose: dict | None, position: np.ndarray, z_axis: np.ndarray) -> dict:
+def _posed(pose: np.ndarray | None, position: np.ndarray, z_axis: np.ndarray) -> dict:
     """The pose (in the body frame) of a primitive at ``position`` with axis ``z_axis``, both
     given in the frame ``pose`` (a geometry's pose in the body frame)."""
     base = np.eye(4) if pose is None else pose
@@ -114,7 +114,7 @@ def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, floa
     and a grid of segment ends along each."""
     centre = points.mean(axis=0)
     _, _, axes = np.linalg.svd(points - centre)
-    best = None
+    best: tuple[float, np.ndarray, np.ndarray, float, float] | None = None
     for axis in axes:
         t = (points - centre) @ axis
         radial = np.linalg.norm(points - centre - np.outer(t, axis), axis=1)
@@ -127,6 +127,7 @@ def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, floa
                 volume = math.pi * radius**2 * (b - a) + 4 / 3 * math.pi * radius**3
                 if best is None or volume < best[0]:
                     best = (volume, centre + (a + b) / 2 * axis, axis, radius, float(b - a))
+    assert best is not None  # three axes, each with a grid of at least one segment
     return best[1], best[2], best[3], best[4]
 
 
@@ -157,7 +158,7 @@ def _collision(body: dict, folder: Path) -> tuple[list[dict], str]:
         for piece in pieces:
             centre, axis, radius, length = fit_capsule(piece)
             prim_volume += math.pi * radius**2 * length + 4 / 3 * math.pi * radius**3
-            shape = {"shape": "capsule" if length > 1e-9 else "sphere", "radius": radius}
+            shape: dict[str, object] = {"shape": "capsule" if length > 1e-9 else "sphere", "radius": radius}
             if length > 1e-9:
                 shape["length"] = length
             shape["pose"] = _posed(pose, centre, axis)
@@ -269,7 +270,10 @@ def _module(m: dict, module_id: str, folder: Path, overrides: dict, applied: lis
             "viscous": float(j.get("frictionViscous", 0.0)),
         }
         joints.append(entry)
-    out = {"id": module_id, "notes": f"Timor module ID {m['header']['ID']}, name {m['header']['name']!r}"}
+    out: dict[str, object] = {
+        "id": module_id,
+        "notes": f"Timor module ID {m['header']['ID']}, name {m['header']['name']!r}",
+    }
     out.update(bodies=bodies, joints=joints, inlet=inlet, outlet=outlet)
     if not joints:
         del out["joints"]

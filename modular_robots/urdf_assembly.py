@@ -104,7 +104,7 @@ def assembly_urdf(composition: Composition, catalog: Catalog, payload_part: str,
     parent, at = "base_link", RX_PI  # the previous outlet (in ``parent``) composed with Rx(pi)
     joint_index = 0
     for index, module_id in enumerate(composition.modules):
-        module = catalog.module(module_id)
+        module = catalog.general_module(module_id)
         parts.append(f"  <!-- module {index}: {module.id} ({module.kind}) -->\n")
         for body, joint in module.chain():
             link = body_link(index, module, body.id)
@@ -140,7 +140,7 @@ def assembly_shapes(composition: Composition, catalog: Catalog) -> list[tuple[st
     capsule's axis runs along the frame's z axis from ``-length/2`` to ``+length/2``."""
     out = []
     for index, module_id in enumerate(composition.modules):
-        module = catalog.module(module_id)
+        module = catalog.general_module(module_id)
         for body in module.bodies:
             link = body_link(index, module, body.id)
             out += [(f"{link}_c{k}", s.radius, s.length, index) for k, s in enumerate(body.collision)]
@@ -153,9 +153,10 @@ def assembly_reach(composition: Composition, catalog: Catalog) -> float:
     each prismatic joint's largest stroke; the base's inlet sits at the origin."""
     total = 0.0
     for module_id in composition.modules:
-        module = catalog.module(module_id)
+        module = catalog.general_module(module_id)
         entry = matrix(module.inlet.pose)[:3, 3]  # the inlet, in the inlet body
         for _, joint in module.chain()[1:]:
+            assert joint is not None  # only the chain's first body has no joint
             total += float(np.linalg.norm(matrix(joint.parent_pose)[:3, 3] - entry))
             if joint.type == "prismatic":
                 total += max(abs(joint.lower), abs(joint.upper))

@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
@@ -36,8 +36,12 @@ def fingerprint(scenario: Scenario, settings: FeasibilitySettings) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _tuple(values) -> tuple[float, ...] | None:
-    return tuple(float(v) for v in values) if values is not None else None
+def _floats(values: Iterable[float]) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
+
+
+def _tuple(values: Iterable[float] | None) -> tuple[float, ...] | None:
+    return _floats(values) if values is not None else None
 
 
 def verdict_from_json(document: dict, composition: Composition) -> Verdict:
@@ -53,7 +57,7 @@ def verdict_from_json(document: dict, composition: Composition) -> Verdict:
         _tuple(document.get("q_start")),
         _tuple(document.get("q_goal")),
         document.get("time_bound"),
-        (_tuple(clear[0]), _tuple(clear[1])) if clear else None,
+        (_floats(clear[0]), _floats(clear[1])) if clear else None,
     )
 
 
@@ -157,6 +161,7 @@ class VerdictFile:
         """Append ``verdict`` as a line, flushed."""
         document = verdict.to_json()
         document["seconds"] = verdict.seconds
+        assert self._file is not None, "use VerdictFile as a context manager"
         self._file.write(json.dumps(document, separators=(",", ":")) + "\n")
         self._file.flush()
         self._line += 1

@@ -13,15 +13,20 @@ from __future__ import annotations
 import html
 import io
 import json
+from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yourdfpy
 
 from .exceptions import InputError, shorten
 from .folder import ResultsFolder, atomic_write
-from .ocp.trajectory import Trajectory
+from .plan.candidate import CandidateStatus
+from .plan.document import drawn_task, winner_plan_files
+from .plan.records import CandidateRecord, ResultDocument
+from .plan.trajectory import Trajectory
 from .report import read_winner, winner_robot
 from .robot import robot_from_urdf
 
@@ -69,20 +74,21 @@ def write_page(folder: str | Path) -> str:
     folder = Path(folder)
     document, urdf, trajectory = read_winner(folder)
     winner_robot(folder, document, urdf, trajectory)
-    urdf_path = folder / document["winner"]["files"]["urdf"]
+    urdf_path = winner_plan_files(document, folder)[0]
     try:
         scene = scene_data(urdf_path, trajectory, document)
     except (ValueError, RuntimeError, TypeError, KeyError, AttributeError, SyntaxError) as exc:
         raise InputError(f"{urdf_path}: cannot pose the winner ({shorten(exc, 120, quote=False)})") from None
-    title = f"{document['winner']['candidate']} — modular-robots"
+    title = f"{document.winner.candidate if document.winner else ''} — modular-robots"
     atomic_write(folder / VIEWER, page(scene, panel(document), title))
     return VIEWER
 
 
-def scene_data(urdf_path: Path, trajectory: Trajectory, document: dict) -> dict:
+def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument | Mapping[str, Any]) -> dict:
     """What the page draws: per link its shapes and per frame its pose, the tool path, the
     obstacles with the clearance margin, the start and goal. Poses are 4x4 matrices, column-major
-    (three.js's order), in the base frame [m]."""
+    (three.js's order), in the base frame [m]. ``document``: as read, or its JSON (whose task
+    and margin may be missing)."""
     text = Path(urdf_path).read_bytes()  # parsed from memory: lxml takes no file name it cannot encode
     urdf = yourdfpy.URDF.load(io.BytesIO(text), load_meshes=False)
     joints = robot_from_urdf(text.decode("utf-8")).joint_names
@@ -96,17 +102,24 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: dict) -> dict:
         urdf.update_cfg(dict(zip(joints, q)))
         frames.append([_columns(urdf.get_transform(link.name, urdf.base_link)) for link in links])
     tool = np.column_stack([np.interp(times, trajectory.t, trajectory.tool[:, k]) for k in range(3)])
-    task = document.get("task") or {}
+    task = drawn_task(document)
     return {
         "tf": tf,
         "times": _round(times),
         "links": [{"name": link.name, "color": _colour(link.name), "shapes": _shapes(link)} for link in links],
         "frames": frames,
         "tool": _round(tool),
-        "obstacles": task.get("obstacles", []),
-        "margin": (document.get("settings") or {}).get("optimizer", {}).get("clearance_margin", 0.0),
-        "start": task.get("start"),
-        "goal": task.get("goal"),
+        "obstacles": [
+            {
+                "center": _round(o.bounding_sphere()[0]),
+                "parts": o.page(),
+                "shell": o.page(task.clearance_margin) if task.clearance_margin > 0 else [],
+            }
+            for o in task.obstacles
+        ],
+        "margin": task.clearance_margin,
+        "start": list(task.start) if task.start is not None else None,
+        "goal": list(task.goal) if task.goal is not None else None,
     }
 
 
@@ -148,37 +161,43 @@ def _round(values: np.ndarray) -> list:
 
 
 # -- the panel ------------------------------------------------------------------------------------
-def panel(document: dict) -> str:
+def panel(document: ResultDocument) -> str:
     """The winner's figures and the candidates' ranking, as HTML."""
-    w = document["winner"]
+    w = document.winner
+    if w is None:
+        raise ValueError(f"{document.source}: no winner to show")
     e = html.escape
     rows = [
-        ("tf", f"{w['tf']:.4f} s"),
-        (f"cost ({(document.get('settings') or {}).get('cost', '')})", f"{w['cost']:.4g}"),
+        ("tf", f"{w.tf:.4f} s"),
+        (f"cost ({document.settings.cost})", f"{w.cost:.4g}"),
     ]
-    approach = w.get("closest_approach")
+    approach = w.closest_approach
     if approach:
         rows.append(
             (
                 "closest approach",
-                f"{approach['clearance'] * 1000:.1f} mm at t = {approach['t']:.3f} s, "
-                f"{approach['primitive']} to task.obstacles[{approach['obstacle']}]",
+                f"{approach.clearance * 1000:.1f} mm at t = {approach.t:.3f} s, "
+                f"{approach.primitive} to task.obstacles[{approach.obstacle}]",
             )
         )
-    verification = w.get("verification") or {}
-    if verification:
-        rows.append(("tool error at tf", f"{verification.get('terminal_error', 0) * 1000:.3f} mm"))
-    used = w.get("limits_used") or {}
+    if w.verification:
+        rows.append(("tool error at tf", f"{_figure(w.verification.terminal_error, 1000, '.3f')} mm"))
+    used = w.limits_used
     if used:
-        rows.append(("torque use per joint", " ".join(f"{100 * u:.0f}%" for u in used.get("effort", []))))
-        rows.append(("speed use per joint", " ".join(f"{100 * u:.0f}%" for u in used.get("velocity", []))))
+        rows.append(("torque use per joint", " ".join(f"{100 * u:.0f}%" for u in used.effort)))
+        rows.append(("speed use per joint", " ".join(f"{100 * u:.0f}%" for u in used.velocity)))
     figures = "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in rows)
-    ranking = _ranking(document.get("candidates") or [], w["candidate"])
+    ranking = _ranking(document.candidates, w.candidate)
     return (
-        f"<h1>{e(w['composition'])}</h1><p class='sub'>{e(document.get('scenario', ''))}: the winner "
-        f"({e(w.get('boundary_pair', ''))} boundary pair)</p><table class='figures'>{figures}</table>"
+        f"<h1>{e(w.composition)}</h1><p class='sub'>{e(document.scenario)}: the winner "
+        f"({e(w.boundary_pair)} boundary pair)</p><table class='figures'>{figures}</table>"
         f"<p class='sub'>{_legend()}</p><h2>Candidates</h2>{ranking}"
     )
+
+
+def _figure(value: float | int | None, scale: float, spec: str) -> str:
+    """``value`` times ``scale`` formatted by ``spec``; ``-`` for a figure written as null."""
+    return "-" if value is None else format(value * scale, spec)
 
 
 def _legend() -> str:
@@ -191,20 +210,21 @@ def _legend() -> str:
     )
 
 
-def _ranking(candidates: list[dict], winner: str, limit: int = 60) -> str:
-    def key(c):
-        return (c["status"] != "optimal", c["cost"] if c["cost"] is not None else np.inf, c["candidate"])
+def _ranking(candidates: tuple[CandidateRecord, ...], winner: str, limit: int = 60) -> str:
+    def key(c: CandidateRecord):
+        return (c.status != CandidateStatus.OPTIMAL, c.cost if c.cost is not None else np.inf, c.candidate)
 
     ranked = sorted(candidates, key=key)
     e = html.escape
     lines = ["<table class='ranking'><tr><th>#</th><th>candidate</th><th>status</th><th>cost</th><th>iterations</th>"]
     for rank, c in enumerate(ranked[:limit], 1):
-        cost = "-" if c["cost"] is None else f"{c['cost']:.4g}"
-        status = c["status"] + (f" at {c['pruned_at_iteration']}" if c.get("pruned_at_iteration") is not None else "")
-        mark = " class='winner'" if c["candidate"] == winner else ""
+        cost = _figure(c.cost, 1, ".4g")
+        status = c.status + (f" at {c.pruned_at_iteration}" if c.pruned_at_iteration is not None else "")
+        mark = " class='winner'" if c.candidate == winner else ""
+        iterations = "-" if c.iterations is None else c.iterations
         lines.append(
-            f"<tr{mark}><td>{rank}</td><td>{e(c['candidate'])}</td><td>{e(status)}</td><td>{cost}</td>"
-            f"<td>{c['iterations']}</td></tr>"
+            f"<tr{mark}><td>{rank}</td><td>{e(c.candidate)}</td><td>{e(status)}</td><td>{cost}</td>"
+            f"<td>{iterations}</td></tr>"
         )
     lines.append("</table>")
     if len(ranked) > limit:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -83,9 +84,17 @@ def catalog_workspace_box(composition: Composition, catalog: Catalog) -> Workspa
     (``tests/test_workspace.py`` checks it to 1e-12). Compositions share their last modules,
     and what each chain of last modules gives is kept."""
     base, *rest = composition.modules
-    lower, upper, rotation, offset = _through(catalog.module(base), _tail(catalog, tuple(rest)), mounted=False)
-    lower, upper = _placed(lower, upper, rotation, offset)
-    return WorkspaceBox(tuple(lower), tuple(upper))
+    tail_lower, tail_upper, rotation, offset = _through(
+        catalog.module(base), _tail(catalog, tuple(rest)), mounted=False
+    )
+    lower, upper = _placed(tail_lower, tail_upper, rotation, offset)
+    return WorkspaceBox(_point(lower), _point(upper))
+
+
+def _point(coordinates: list[float]) -> tuple[float, float, float]:
+    """A box corner ``[x, y, z]`` as the tuple :class:`WorkspaceBox` holds."""
+    x, y, z = coordinates
+    return x, y, z
 
 
 _Tail = tuple[tuple[float, ...], tuple[float, ...], tuple[tuple[float, ...], ...], tuple[float, ...]]
@@ -106,6 +115,8 @@ def _through(module: Module, tail: _Tail, mounted: bool) -> _Tail:
     """``tail``, given at ``module``'s outlet, carried to where the module is mounted
     (``mounted``) or, for the base, which the URDF places at the origin without its
     ``twist_in``, to its own frame."""
+    lower: Sequence[float]
+    upper: Sequence[float]
     lower, upper, rotation, offset = tail
     rotation, offset = _composed(_rx(module.twist_out), (0.0, 0.0, module.length), rotation, offset)
     if module.joint != "fixed":
@@ -113,7 +124,9 @@ def _through(module: Module, tail: _Tail, mounted: bool) -> _Tail:
         if module.joint == "revolute":
             lower, upper = _moved(lower, upper, "revolute", _AXES["Z"], None)
         else:
-            lower, upper = _moved(lower, upper, "prismatic", _AXES["Z"], (module.limits.lower, module.limits.upper))
+            limits = module.limits
+            assert limits is not None  # a movable module has limits
+            lower, upper = _moved(lower, upper, "prismatic", _AXES["Z"], (limits.lower, limits.upper))
         rotation, offset = _IDENTITY, (0.0, 0.0, 0.0)
     if mounted:
         rotation, offset = _composed(_rx(module.twist_in), (0.0, 0.0, 0.0), rotation, offset)

@@ -1,4 +1,4 @@
-"""trust-constr's canonical constraints by gathers (:mod:`modular_robots.ocp.canonical`) against
+"""trust-constr's canonical constraints by gathers (:mod:`modular_robots.ocp._scipy.canonical`) against
 SciPy's own fancy-indexing code: bit-identical values and Jacobians for every kind of row (equal,
 less, greater, two-sided, unbounded) and for a real paper-5kg problem with its variable bounds."""
 
@@ -11,13 +11,9 @@ from scipy.optimize import Bounds, NonlinearConstraint
 from scipy.optimize._constraints import PreparedConstraint
 from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
 
-from modular_robots.composition import Composition
-from modular_robots.feasibility import check_composition
-from modular_robots.ocp.candidate import composition_problem
-from modular_robots.ocp.canonical import GatheredCanonical, canonical_rows
-from modular_robots.scenario import load_scenario
+from modular_robots.ocp._scipy.canonical import GatheredCanonical, canonical_rows
 
-from .conftest import PAPER_5KG
+from .helpers.problems import paper_problem
 
 N = 7
 
@@ -215,15 +211,6 @@ def test_the_jacobians_handed_out_are_the_callers_to_change():
         J.indices[:] = 0
         J.indptr[:] = 0
     assert_same(ours, theirs, x0 + 0.1)
-
-
-def paper_problem():
-    scenario = load_scenario(PAPER_5KG)
-    composition = Composition.from_name("B-J1-L3-J1-L2-J1-L1-J1-L1-E2", scenario.catalog)
-    verdict = check_composition(composition, scenario.catalog, scenario.task)
-    return composition_problem(
-        composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
-    )
 
 
 def test_a_shooting_problems_rows_are_scipys_bit_for_bit():

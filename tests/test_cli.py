@@ -12,9 +12,7 @@ from modular_robots.cli import main
 from modular_robots.composition import Composition
 from modular_robots.scenario import load_scenario
 
-from .conftest import PAPER_CATALOG, PAPER_SCENARIO, ROOT
-
-SMALL_SCENARIO = ROOT / "tests" / "data" / "small.yaml"
+from .helpers.paths import PAPER_CATALOG, PAPER_SCENARIO, SMALL
 
 
 def test_enumerate_count():
@@ -67,7 +65,7 @@ def test_optimize_writes_a_motion_from_start_to_goal(tmp_path):
     reported ``tf``, and the URDF it writes loads in Pinocchio with the composition's joints."""
     name = "B-J1-L3-J1-L3-E2"
     out = tmp_path / "one"
-    result = CliRunner().invoke(main, ["optimize", name, "--scenario", str(SMALL_SCENARIO), "--out", str(out)])
+    result = CliRunner().invoke(main, ["optimize", name, "--scenario", str(SMALL), "--out", str(out)])
     assert result.exit_code == 0, result.output
     doc = json.loads((out / "result.json").read_text())
     assert (doc["status"], doc["partial"], doc["winner"]["composition"]) == ("done", False, name)
@@ -76,7 +74,7 @@ def test_optimize_writes_a_motion_from_start_to_goal(tmp_path):
     assert {s: doc["counts"][s] for s in ("optimal", "pruned", "failed", "stopped")} == {
         s: statuses.count(s) for s in ("optimal", "pruned", "failed", "stopped")
     }
-    scenario = load_scenario(SMALL_SCENARIO)
+    scenario = load_scenario(SMALL)
     with open(out / "trajectory.csv") as f:
         rows = list(csv.DictReader(f))
     nv = Composition.from_name(name, scenario.catalog).dof

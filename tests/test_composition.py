@@ -12,7 +12,7 @@ import pytest
 
 from modular_robots import Composition, CompositionError, count_compositions, enumerate_compositions, load_catalog
 
-from .conftest import PAPER_CATALOG
+from .helpers.paths import PAPER_CATALOG
 
 
 def test_paper_catalogue_gives_3108(paper_catalog):

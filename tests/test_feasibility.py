@@ -31,7 +31,7 @@ from modular_robots.feasibility import (
 )
 from modular_robots.ik import _lm_steps, ik_seeds, solve_position_ik, solve_position_ik_batch, solve_position_ik_many
 
-from .conftest import PAPER_5KG, PAPER_CATALOG, SMALL
+from .helpers.paths import PAPER_5KG, PAPER_CATALOG, SMALL
 
 G = 9.81
 

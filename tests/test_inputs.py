@@ -7,7 +7,7 @@ import pytest
 
 from modular_robots import CatalogError, Composition, CompositionError, ScenarioError, load_catalog, load_scenario
 
-from .conftest import PAPER_CATALOG, PAPER_SCENARIO
+from .helpers.paths import PAPER_CATALOG, PAPER_SCENARIO
 
 CATALOG_TEXT = PAPER_CATALOG.read_text()
 SCENARIO_TEXT = PAPER_SCENARIO.read_text()

@@ -28,7 +28,8 @@ from modular_robots.composition import Composition, enumerate_compositions
 from modular_robots.robot import robot_model
 from modular_robots.urdf import PAYLOAD_RADIUS
 
-CATALOG_PATH = Path(__file__).resolve().parents[1] / "scenarios/catalogs/paper.yaml"
+from .helpers.mujoco_engine import mj_qadr, mujoco_model
+from .helpers.paths import PAPER_CATALOG
 
 # Compositions for the dynamics tests, by family.
 REVOLUTE_ONLY = ["B-J1-L1-E1", "B-J1-L3-J1-L2-E1", "B-J1-L3-J1-L3-J1-L2-J1-L1-E1", "B-J1-L1-J1-L1-J1-L3-E1"]
@@ -47,7 +48,7 @@ PAYLOADS = [0.0, 5.0, 50.0]
 # --------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def catalog_path() -> Path:
-    return CATALOG_PATH
+    return PAPER_CATALOG
 
 
 @pytest.fixture(scope="module")
@@ -73,8 +74,8 @@ def _asymmetric(module: dict) -> dict:
 def dyn_cat(request, tmp_path_factory):
     """The paper's catalogue, and the same modules with every inertial term non-zero."""
     if request.param == "paper":
-        return load_catalog(CATALOG_PATH)
-    data = yaml.safe_load(CATALOG_PATH.read_text())
+        return load_catalog(PAPER_CATALOG)
+    data = yaml.safe_load(PAPER_CATALOG.read_text())
     data["modules"] = [_asymmetric(m) for m in data["modules"]]
     path = tmp_path_factory.mktemp("asymmetric") / "asymmetric.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -253,7 +254,7 @@ CHOSEN_FK = ["B-J1-L1-J2-L3-E1", "B-J2-L3-J1-L1-E2", "B-J1-L3-J1-L3-J1-L2-J1-L1-
 
 
 def _fk_sample():
-    c = load_catalog(CATALOG_PATH)
+    c = load_catalog(PAPER_CATALOG)
     names = [comp.name for i, comp in enumerate(enumerate_compositions(c)) if i % 97 == 0]
     return names + [n for n in CHOSEN_FK if n not in names]
 
@@ -440,41 +441,6 @@ MJ_CASES = [
 ]
 
 
-def _mujoco_model(urdf_text: str, gravity):
-    """Compile the URDF text with MuJoCo's own URDF importer.
-
-    Import settings (changed on the MjSpec before compiling, so nothing is edited in the text):
-    * fusestatic = False: MuJoCo would otherwise fuse fixed links (links, tool0, payload) into
-      their parents, and tool0 would no longer exist as a body;
-    * inertiafromgeom = FALSE: by default ("auto") a link without <inertial> gets an inertia
-      inferred from its collision geoms at density 1000; the payload link of a 0 kg payload has
-      no <inertial> but a sphere collision, and would silently weigh 0.52 kg. With FALSE only the
-      explicit URDF inertials are used (balanceinertia stays off, MuJoCo's default).
-    Then contacts and all constraints (joint limits) are disabled, armature, damping, friction
-    loss and stiffness are zeroed, and gravity is set to the Pinocchio model's.
-    """
-    mujoco = pytest.importorskip("mujoco")
-    spec = mujoco.MjSpec.from_string(urdf_text)
-    spec.compiler.fusestatic = False
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.compiler.balanceinertia = False
-    m = spec.compile()
-    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
-    m.opt.gravity[:] = gravity
-    m.dof_armature[:] = 0.0
-    m.dof_damping[:] = 0.0
-    m.dof_frictionloss[:] = 0.0
-    m.jnt_stiffness[:] = 0.0
-    return mujoco, m
-
-
-def _mj_qadr(mujoco, m, n):
-    """qpos/qvel addresses of joint_1..joint_n (so the order never depends on MuJoCo's)."""
-    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i}") for i in range(1, n + 1)]
-    assert min(ids) >= 0, "a joint_i is missing in MuJoCo's model"
-    return np.array([m.jnt_qposadr[i] for i in ids]), np.array([m.jnt_dofadr[i] for i in ids]), ids
-
-
 @pytest.mark.parametrize("name,payload", MJ_CASES, ids=[f"{n}+{p:g}kg" for n, p in MJ_CASES])
 def test_mujoco_kinematics_dynamics_mass_limits(cat, name, payload):
     """MuJoCo (own URDF parser, own dynamics) agrees with the package's model: tool0 position
@@ -483,11 +449,11 @@ def test_mujoco_kinematics_dynamics_mass_limits(cat, name, payload):
     r = robot_model(Composition.from_name(name, cat), cat, payload)
     mods = modules_of(name, cat)
     movable = [mm for mm in mods if mm.dof]
-    mujoco, m = _mujoco_model(r.urdf, r.model.gravity.linear)
+    mujoco, m = mujoco_model(r.urdf, r.model.gravity.linear)
     d = mujoco.MjData(m)
     n = len(movable)
     assert m.nq == m.nv == n
-    qadr, dadr, jids = _mj_qadr(mujoco, m, n)
+    qadr, dadr, jids = mj_qadr(mujoco, m, n)
     tool = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "tool0")
     assert tool >= 0
 

@@ -1,5 +1,5 @@
 """trust-constr's projections computed from the barrier structure
-(:mod:`modular_robots.ocp.projections`) against SciPy's own general sparse path and a dense QR,
+(:mod:`modular_robots.ocp._scipy.projections`) against SciPy's own general sparse path and a dense QR,
 on random matrices and on the barrier Jacobian of a real paper-5kg shooting problem, with slacks
 from 1e-9 (a row at its bound near convergence) to 1e3 (a far bound)."""
 
@@ -16,14 +16,20 @@ from scipy.optimize._trustregion_constr.projections import projections as scipy_
 
 from modular_robots.composition import Composition
 from modular_robots.feasibility import check_composition
-from modular_robots.ocp import projections as projections_module
-from modular_robots.ocp import trust_constr
+from modular_robots.ocp._scipy import projections as projections_module
+from modular_robots.ocp._scipy import trust_constr
+from modular_robots.ocp._scipy.products import MatVec, rmatvec
+from modular_robots.ocp._scipy.projections import SLACK_THRESHOLD, BarrierKKT, barrier_projections
 from modular_robots.ocp.candidate import composition_problem
-from modular_robots.ocp.products import MatVec, rmatvec
-from modular_robots.ocp.projections import SLACK_THRESHOLD, BarrierKKT, barrier_projections
 from modular_robots.scenario import load_scenario
 
-from .conftest import PAPER_5KG
+from .helpers.paths import PAPER_5KG
+
+
+@pytest.fixture(autouse=True, scope="module")
+def installed():
+    """The replacements in place, as a solver puts them before its first solve."""
+    return trust_constr.install()
 
 
 def barrier_jacobian(j_eq, j_ineq, slacks) -> sparse.csr_array:

@@ -33,9 +33,8 @@ from modular_robots.pruning import GUARD_VIOLATION, Progress, PruningManager, Ro
 from modular_robots.pruning import ratio_rule as _ratio_rule
 from modular_robots.scenario import PruningSettings, load_scenario
 
-from .conftest import PAPER_SCENARIO, ROOT
+from .helpers.paths import PAPER_SCENARIO, SMALL
 
-SMALL = ROOT / "tests" / "data" / "small.yaml"
 SMALL_WINNER = "B-J1-L1-J1-L1-J1-L1-E2"
 #: Its time [s] within the default margins (effort 0.9, velocity 0.95; 1.575 s at the full limits).
 SMALL_TF = 1.658

@@ -28,13 +28,11 @@ from modular_robots.execution import ExecutionSettings, make_engine, make_execut
 from modular_robots.pipeline import run_scenario, with_execution
 from modular_robots.scenario import load_scenario
 
-from .conftest import start_run
+from .helpers.paths import CLI, ROOT, SMALL
+from .helpers.runs import start_run
 
 ray = pytest.importorskip("ray")
 
-ROOT = Path(__file__).resolve().parents[1]
-SMALL = ROOT / "tests" / "data" / "small.yaml"
-CLI = [str(Path(sys.executable).parent / "modular-robots")]
 RAY = ExecutionSettings("ray")
 
 

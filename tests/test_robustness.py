@@ -36,7 +36,8 @@ from modular_robots.pipeline import run_scenario
 from modular_robots.recorder import previous_files
 from modular_robots.robot import robot_model
 
-from .conftest import ROOT, start_run
+from .helpers.paths import ROOT
+from .helpers.runs import start_run
 
 SMALL = ROOT / "tests" / "data" / "small.yaml"
 SMALL_TEXT = SMALL.read_text()

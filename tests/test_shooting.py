@@ -19,7 +19,6 @@ Everything is seeded; no test is skipped.
 from __future__ import annotations
 
 import csv
-import importlib.metadata
 import json
 import math
 import threading
@@ -37,17 +36,19 @@ from modular_robots.cli import main
 from modular_robots.composition import Composition
 from modular_robots.exceptions import CompositionError
 from modular_robots.feasibility import check_composition
-from modular_robots.ocp import trust_constr, verification
+from modular_robots.ocp import verification
+from modular_robots.ocp._scipy import trust_constr
 from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem, make_candidate
 from modular_robots.ocp.shooting import NonFiniteError, ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
 from modular_robots.ocp.trajectory import sample_trajectory
 from modular_robots.ocp.verification import Verification, verify
 from modular_robots.pipeline import candidate_specs, optimize_composition
-from modular_robots.robot import Primitive, RobotModel
+from modular_robots.robot import RobotModel
 from modular_robots.scenario import OptimizerSettings, SphereObstacle, load_scenario
 
-from .conftest import PAPER_5KG, ROOT
+from .helpers.models import ARM_GOAL, ARM_START, ARM_VEL, L_LINK, M_LINK, R_LINK, planar_arm, ur5
+from .helpers.paths import PAPER_5KG, ROOT
 
 # A revolute + prismatic composition (J2 in the middle) and a revolute-only one, both feasible
 # for the 5 kg paper task. The revolute-only one is chosen so that the forward transcription's
@@ -80,40 +81,6 @@ def rotor(inertia: float, tau_max: float, v_max: float, arm: float = 0.5) -> Rob
     model.addFrame(pin.Frame("tool0", joint, 0, pin.SE3(np.eye(3), np.array([arm, 0.0, 0.0])), pin.FrameType.OP_FRAME))
     model.gravity = pin.Motion.Zero()
     return RobotModel(model, "tool0", name="rotor")
-
-
-# Planar two-link arm in the horizontal plane (joint axes along z, parallel to gravity, so
-# gravity does no work): uniform rods of mass M and length L along each link's x axis.
-M_LINK, L_LINK, R_LINK = 1.0, 1.0, 0.05
-ARM_TAU = np.array([10.0, 10.0])
-ARM_VEL = np.array([10.0, 10.0])
-
-
-def planar_arm() -> RobotModel:
-    """The two-link arm; each link carries a capsule primitive on a frame whose z axis runs
-    along the link (primitives are capsules along their frame's z)."""
-    model = pin.Model()
-    model.name = "planar2"
-    along_x = pin.utils.rotate("y", np.pi / 2)  # frame z axis -> link x axis
-    rod = np.diag([1e-4, M_LINK * L_LINK**2 / 12, M_LINK * L_LINK**2 / 12])
-    parent, placement, primitives = 0, pin.SE3.Identity(), []
-    for k in range(2):
-        joint = model.addJoint(
-            parent,
-            pin.JointModelRZ(),
-            placement,
-            f"joint{k + 1}",
-            ARM_TAU[k : k + 1],
-            ARM_VEL[k : k + 1],
-            np.array([-3.0]),
-            np.array([3.0]),
-        )
-        model.appendBodyToJoint(joint, pin.Inertia(M_LINK, np.array([L_LINK / 2, 0.0, 0.0]), rod), pin.SE3.Identity())
-        model.addFrame(pin.Frame(f"link{k + 1}", joint, 0, pin.SE3(along_x, np.zeros(3)), pin.FrameType.OP_FRAME))
-        primitives.append(Primitive(f"link{k + 1}", f"link{k + 1}", R_LINK, L_LINK, 0.0, k))
-        parent, placement = joint, pin.SE3(np.eye(3), np.array([L_LINK, 0.0, 0.0]))
-    model.addFrame(pin.Frame("tool0", parent, 0, placement, pin.FrameType.OP_FRAME))
-    return RobotModel(model, "tool0", primitives, name="planar2")
 
 
 def arm_mass_coriolis(q, v):
@@ -176,19 +143,6 @@ def replay_arm(problem: ShootingProblem, y: np.ndarray, points_per_interval: int
         vs.append(sol.y[2:].T)
         x = sol.y[:, -1]
     return np.vstack(qs), np.vstack(vs), x
-
-
-def ur5(payload: float) -> RobotModel:
-    """The UR5 of example-robot-data with a solid-sphere payload (radius 5 cm) centred at tool0."""
-    path = next(
-        f.locate()
-        for f in importlib.metadata.files("example-robot-data")
-        if str(f).endswith("ur_description/urdf/ur5_robot.urdf")
-    )
-    model = pin.buildModelFromUrdf(str(path))
-    tool = model.frames[model.getFrameId("tool0")]
-    model.appendBodyToJoint(tool.parentJoint, pin.Inertia.FromSphere(payload, 0.05), tool.placement)
-    return RobotModel(model, "tool0", [Primitive("payload", "tool0", 0.05)], name="ur5")
 
 
 def improv_problem(transcription: str, nodes: int = 4, substeps: int = 3) -> ShootingProblem:
@@ -499,7 +453,6 @@ def test_cost_bound_counts_only_velocity_limited_joints_of_the_time_cost(v_max, 
 # --------------------------------------------------------------------------------------------
 # 3. an obstacle across the straight line
 # --------------------------------------------------------------------------------------------
-ARM_START, ARM_GOAL = [-1.2, 0.3], [1.2, -0.3]
 # The straight-line motion sweeps the stretched arm through the sphere; the time-optimal motion
 # folds the elbow to cut the inertia about joint 1 and passes inside it.
 ARM_OBSTACLE = SphereObstacle((1.9, 0.0, 0.0), 0.2)

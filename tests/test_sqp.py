@@ -1,4 +1,4 @@
-"""trust-constr's SQP loop with repeated second-order corrections (:mod:`modular_robots.ocp.sqp`):
+"""trust-constr's SQP loop with repeated second-order corrections (:mod:`modular_robots.ocp._scipy.sqp`):
 with one correction it is SciPy's loop iterate for iterate; the corrections of one step, on a
 problem small enough to follow by hand (a circle), land where the hand says and stop where the
 rule says; and on a paper-5kg candidate the loop takes a path of its own to the same optimum,
@@ -10,15 +10,21 @@ import threading
 
 import numpy as np
 import pytest
+from scipy.optimize._trustregion_constr import tr_interior_point
 
-from modular_robots.ocp import sqp, trust_constr
+from modular_robots.ocp._scipy import sqp, trust_constr
 from modular_robots.ocp.solver import ShootingSolver
 from modular_robots.ocp.verification import verify
 
-from .test_canonical import paper_problem
-from .test_trust_constr import history
+from .helpers.problems import history, paper_problem
 
 LOOP = sqp.equality_constrained_sqp
+
+
+@pytest.fixture(autouse=True, scope="module")
+def installed():
+    """The replacements in place, as a solver puts them before its first solve."""
+    return trust_constr.install()
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +45,7 @@ def with_corrections(monkeypatch, max_corrections: int) -> dict:
 
 
 def with_scipys_loop(monkeypatch) -> None:
-    monkeypatch.setattr(trust_constr._interior_point, "equality_constrained_sqp", trust_constr.scipy_sqp_loop)
+    monkeypatch.setattr(tr_interior_point, "equality_constrained_sqp", trust_constr.scipy_sqp_loop)
 
 
 def test_with_one_correction_the_loop_is_scipys_iterate_for_iterate(monkeypatch, problem):
@@ -63,9 +69,9 @@ def test_repeated_corrections_reach_the_same_verified_optimum(monkeypatch, probl
     assert verify(problem, ours.final.y).passed
 
 
-def test_the_loop_is_installed_for_solver_threads():
-    assert "SQP loop" in trust_constr.INSTALLED
-    assert trust_constr._interior_point.equality_constrained_sqp is trust_constr.sqp_loop
+def test_the_loop_is_installed_for_solver_threads(installed):
+    assert "SQP loop" in installed
+    assert tr_interior_point.equality_constrained_sqp is trust_constr.sqp_loop
     assert trust_constr.scipy_sqp_loop.__module__.startswith("scipy.")
     assert sqp.MAX_CORRECTIONS == 4 and sqp.CONTRACTION == 0.99  # IPOPT's max_soc and kappa_soc
 

@@ -18,11 +18,9 @@ from modular_robots import Composition, load_scenario
 from modular_robots.ocp.candidate import BoundaryPair, CandidateSpec, make_candidate
 from modular_robots.pipeline import cost_bound
 
-from .conftest import ROOT
+from .helpers.paths import SUITE_RESULTS, SUITE_SCENARIOS
 
-RESULTS = ROOT / "benchmarks" / "results"
-SUITE = ROOT / "benchmarks" / "scenarios"
-FILES = sorted(RESULTS.glob("suite*.json"))
+FILES = sorted(SUITE_RESULTS.glob("suite*.json"))
 
 
 def _entries():
@@ -32,7 +30,7 @@ def _entries():
 def test_the_suite_results_are_committed():
     assert FILES, "benchmarks/results/suite*.json is missing: run `python -m benchmarks suite`"
     scenarios = {b["scenario"] for b in _entries()}
-    assert len(scenarios) >= 8 and all((SUITE / f"{name}.yaml").is_file() for name in scenarios)
+    assert len(scenarios) >= 8 and all((SUITE_SCENARIOS / f"{name}.yaml").is_file() for name in scenarios)
 
 
 def test_the_bound_never_exceeds_an_optimum_on_the_suite():
@@ -40,7 +38,7 @@ def test_the_bound_never_exceeds_an_optimum_on_the_suite():
     optima = 0
     scenarios = {}
     for entry in entries:
-        scenario = scenarios.setdefault(entry["scenario"], load_scenario(SUITE / f"{entry['scenario']}.yaml"))
+        scenario = scenarios.setdefault(entry["scenario"], load_scenario(SUITE_SCENARIOS / f"{entry['scenario']}.yaml"))
         composition = Composition.from_name(entry["composition"], scenario.catalog)
         joints = [scenario.catalog.module(m) for m in composition.modules if scenario.catalog.module(m).dof]
         velocity = np.array([m.limits.velocity for m in joints]) * scenario.optimizer.velocity_margin
@@ -61,7 +59,7 @@ def test_the_admission_bound_is_the_problem_bound():
     problem carries (pruning), for both boundary pairs of a few suite candidates."""
     entries = _entries()[:: max(1, len(_entries()) // 4)][:4]
     for entry in entries:
-        scenario = load_scenario(SUITE / f"{entry['scenario']}.yaml")
+        scenario = load_scenario(SUITE_SCENARIOS / f"{entry['scenario']}.yaml")
         composition = Composition.from_name(entry["composition"], scenario.catalog)
         for pair in BoundaryPair:
             spec = CandidateSpec(composition, tuple(entry["q_start"]), tuple(entry["q_goal"]), pair)

@@ -21,11 +21,10 @@ from modular_robots.ocp.trajectory import controller_rate, sample_trajectory
 from modular_robots.report import export_controller_rate
 from modular_robots.robot import RobotModel, robot_from_urdf
 
-from .conftest import PAPER_5KG, ROOT
-from .test_physics_crosscheck import _mj_qadr, _mujoco_model
-from .test_shooting import ARM_GOAL, ARM_START, planar_arm, ur5
+from .helpers.models import ARM_GOAL, ARM_START, planar_arm, ur5
+from .helpers.mujoco_engine import mj_qadr, mujoco_model
+from .helpers.paths import PAPER_5KG, SMALL
 
-SMALL = ROOT / "tests" / "data" / "small.yaml"
 SMALL_NAME = "B-J1-L1-J1-L1-J1-L1-E2"
 #: The paper-5kg winner of ``make run`` (from its clear boundary pair).
 PAPER_WINNER = "B-J1-L2-J1-L1-J1-L2-J2-L1-E2+clear"
@@ -55,10 +54,10 @@ def small_results(tmp_path_factory):
 
 
 def _mujoco(urdf_text: str, armature=None):
-    mujoco, m = _mujoco_model(urdf_text, np.array([0.0, 0.0, -9.81]))
+    mujoco, m = mujoco_model(urdf_text, np.array([0.0, 0.0, -9.81]))
     if armature is not None:
         n = len(armature)
-        _, dadr, _ = _mj_qadr(mujoco, m, n)
+        _, dadr, _ = mj_qadr(mujoco, m, n)
         m.dof_armature[dadr] = armature
     return mujoco, m
 
@@ -83,7 +82,7 @@ def test_trajectory_csv_follows_the_acceleration_contract_in_mujoco(small_result
     document = json.loads((out / "result.json").read_text())
     mujoco, m = _mujoco((out / "winner.urdf").read_text(), document["winner"]["drive"]["armature"])
     d = mujoco.MjData(m)
-    qadr, dadr, _ = _mj_qadr(mujoco, m, n)
+    qadr, dadr, _ = mj_qadr(mujoco, m, n)
     tool = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "tool0")
     limit = m.jnt_actfrcrange[
         [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i}") for i in range(1, n + 1)], 1
@@ -160,7 +159,7 @@ def test_export_at_1khz_follows_the_zero_order_hold_contract_in_mujoco(small_res
     document = json.loads((out / "result.json").read_text())
     assert t[-1] == pytest.approx(document["winner"]["tf"], abs=1e-9)
     mujoco, m = _mujoco((out / "winner.urdf").read_text(), document["winner"]["drive"]["armature"])
-    qadr, dadr, _ = _mj_qadr(mujoco, m, n)
+    qadr, dadr, _ = mj_qadr(mujoco, m, n)
     m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     d = mujoco.MjData(m)
     worst_q = worst_v = 0.0
@@ -231,7 +230,7 @@ def test_the_paper_winner_is_tracked_at_1khz_without_saturating_in_mujoco(tmp_pa
     reference = controller_rate(run.winner.trajectory, robot, 1000.0)
     mujoco, m = _mujoco(urdf, armature)
     limit = np.asarray(robot.effort_limit)
-    qadr, dadr, _ = _mj_qadr(mujoco, m, robot.nv)
+    qadr, dadr, _ = mj_qadr(mujoco, m, robot.nv)
     error, deviation, clipped = _mujoco_tracking(mujoco, m, qadr, dadr, reference, limit)
     assert error <= 0.01 and deviation <= 0.02 and clipped == 0.0
     ours = document["winner"]["tracking"]
@@ -241,7 +240,7 @@ def test_the_paper_winner_is_tracked_at_1khz_without_saturating_in_mujoco(tmp_pa
 
 def _ur5_urdf(payload: float) -> str:
     """The UR5's URDF without meshes (MuJoCo's importer would look for them), with the payload
-    sphere of :func:`tests.test_shooting.ur5` as a fixed body at tool0."""
+    sphere of :func:`tests.helpers.models.ur5` as a fixed body at tool0."""
     import importlib.metadata
 
     path = next(

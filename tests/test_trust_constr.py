@@ -1,10 +1,9 @@
-"""The parts of trust-constr that :mod:`modular_robots.ocp.trust_constr` takes over: only in a
+"""The parts of trust-constr that :mod:`modular_robots.ocp._scipy.trust_constr` takes over: only in a
 solver's thread, and the bit-identical ones (canonical constraints, barrier function) leave a
 whole solve's iterates bit for bit as SciPy's code makes them."""
 
 from __future__ import annotations
 
-import hashlib
 import threading
 import warnings
 from types import SimpleNamespace
@@ -14,12 +13,20 @@ import pytest
 from scipy import sparse
 from scipy.optimize import SR1, Bounds
 from scipy.optimize._constraints import PreparedConstraint
+from scipy.optimize._differentiable_functions import VectorFunction
+from scipy.optimize._trustregion_constr import minimize_trustregion_constr, qp_subproblem, tr_interior_point
 from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
 
-from modular_robots.ocp import barrier, boxes, canonical, sqp, trust_constr
-from modular_robots.ocp.solver import _SR1, ShootingSolver
+from modular_robots.ocp._scipy import barrier, boxes, canonical, sqp, trust_constr
+from modular_robots.ocp.solver import _SR1
 
-from .test_canonical import paper_problem
+from .helpers.problems import history, paper_problem
+
+
+@pytest.fixture(autouse=True, scope="module")
+def installed():
+    """The replacements in place, as a solver puts them before its first solve."""
+    return trust_constr.install()
 
 
 class Subproblem:  # what BarrierSubproblem._compute_function reads of its instance
@@ -75,15 +82,6 @@ def test_outside_a_solver_thread_everything_is_scipys(monkeypatch):
     assert type(trust_constr.SolverCanonical.from_PreparedConstraint(bounds)) is CanonicalConstraint
 
 
-def history(problem) -> tuple[int, str]:
-    solver = ShootingSolver(problem)
-    digest = hashlib.sha1()
-    for iterate in solver.iterate():
-        digest.update(iterate.y.tobytes())
-        digest.update(np.float64(iterate.optimality).tobytes())
-    return solver.outcome.iterations, digest.hexdigest()
-
-
 def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(monkeypatch):
     problem = paper_problem()
     used = {"gathers": 0, "barrier": 0, "puts": 0, "updates": 0, "boxes": 0}
@@ -100,7 +98,7 @@ def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(m
 
     monkeypatch.setattr(canonical._Gather, "jac", counted("gathers", gathered_jac))
     monkeypatch.setattr(
-        trust_constr._interior_point.BarrierSubproblem,
+        tr_interior_point.BarrierSubproblem,
         "_compute_function",
         counted("barrier", barrier_function, solver_thread_only=True),
     )
@@ -110,16 +108,16 @@ def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(m
     monkeypatch.setattr(sqp, "box_intersections", counted("boxes", fast_boxes))
     ours = history(problem)
     assert min(used.values()) > 10, used  # every hook did run
-    monkeypatch.setattr(trust_constr._minimize_module, "CanonicalConstraint", trust_constr.ScipyCanonical)
+    monkeypatch.setattr(minimize_trustregion_constr, "CanonicalConstraint", trust_constr.ScipyCanonical)
     for owner, name, scipys in (
-        (trust_constr._interior_point.BarrierSubproblem, "_compute_function", trust_constr.scipy_barrier_function),
+        (tr_interior_point.BarrierSubproblem, "_compute_function", trust_constr.scipy_barrier_function),
         (
-            trust_constr._interior_point.BarrierSubproblem,
+            tr_interior_point.BarrierSubproblem,
             "_assemble_sparse_jacobian",
             trust_constr.scipy_barrier_jacobian,
         ),
-        (trust_constr._VectorFunction, "_update_hess", trust_constr.scipy_hessian_update),
-        (trust_constr._qp, "box_intersections", trust_constr.scipy_box_intersections),
+        (VectorFunction, "_update_hess", trust_constr.scipy_hessian_update),
+        (qp_subproblem, "box_intersections", trust_constr.scipy_box_intersections),
         (sqp, "box_intersections", trust_constr.scipy_box_intersections),
     ):
         monkeypatch.setattr(owner, name, scipys)
@@ -127,9 +125,9 @@ def test_a_solve_is_scipys_iterate_for_iterate_without_the_bit_identical_hooks(m
     assert ours[0] > 10
 
 
-def test_every_replacement_is_in_place_on_this_scipy():
-    """A SciPy that moved one of the replaced names would silently keep its own (slower) code."""
-    assert trust_constr.INSTALLED == (
+def test_every_replacement_is_in_place_on_this_scipy(installed):
+    """A SciPy that moved one of the replaced names would keep its own (slower) code."""
+    assert installed.complete and installed.hooks == (
         "projections",
         "canonical constraints",
         "barrier function",
@@ -138,12 +136,12 @@ def test_every_replacement_is_in_place_on_this_scipy():
         "quasi-Newton update",
         "box intersections",
     )
-    assert trust_constr._minimize_module.CanonicalConstraint is trust_constr.SolverCanonical
-    subproblem = trust_constr._interior_point.BarrierSubproblem
+    assert minimize_trustregion_constr.CanonicalConstraint is trust_constr.SolverCanonical
+    subproblem = tr_interior_point.BarrierSubproblem
     assert subproblem._compute_function is trust_constr.barrier_function
     assert subproblem._assemble_sparse_jacobian is trust_constr.barrier_jacobian
-    assert trust_constr._VectorFunction._update_hess is trust_constr.hessian_update
-    assert trust_constr._qp.box_intersections is trust_constr.box_intersections
+    assert VectorFunction._update_hess is trust_constr.hessian_update
+    assert qp_subproblem.box_intersections is trust_constr.box_intersections
 
 
 def test_the_quasi_newton_hessian_is_scipys_sr1_and_silent_on_an_unchanged_gradient():

@@ -20,7 +20,7 @@ from modular_robots.ocp.trajectory import Trajectory
 from modular_robots.pipeline import run_scenario
 from modular_robots.viewer import HEADLESS_CHROMIUM, VIEWER, scene_data
 
-from .conftest import ROOT
+from .helpers.paths import ROOT
 
 SMALL = ROOT / "tests" / "data" / "small.yaml"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

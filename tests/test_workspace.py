@@ -17,7 +17,7 @@ from modular_robots.ik import ik_seeds, solve_position_ik_many
 from modular_robots.robot import RobotModel
 from modular_robots.workspace import WorkspaceBox, catalog_workspace_box, workspace_box
 
-from .conftest import PAPER_5KG
+from .helpers.paths import PAPER_5KG
 
 SCENARIOS = PAPER_5KG.parent
 

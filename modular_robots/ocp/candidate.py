@@ -1,6 +1,7 @@
 """One candidate's trajectory optimisation, from problem to verified result, as a generator.
 
-A :class:`Candidate` chains :class:`~modular_robots.ocp.solver.ShootingSolver` runs: it solves,
+A :class:`Candidate` chains runs of the scenario's solver (:mod:`~modular_robots.ocp.solvers`;
+:class:`~modular_robots.ocp.solver.ShootingSolver` by default): it solves,
 verifies (:func:`~modular_robots.ocp.verification.verify`) and, when the re-integrated motion misses
 the goal by more than 1 cm or breaks a limit or the clearance between sub-steps, doubles the RK4
 sub-steps and solves again warm-started from the coarse solution (SPEC §5). When the first solve
@@ -12,21 +13,24 @@ pruning manager sees one sequence per candidate.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field, replace
-from enum import StrEnum
+from collections.abc import Generator, Iterator, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..catalog import Catalog
 from ..composition import Composition
+from ..plan.boundary import BoundaryPair
+from ..plan.candidate import CandidateResult, CandidateStatus
+from ..plan.verification import Verification
 from ..robot import robot_model
 from ..scenario import OptimizerSettings, Scenario, Task
 from .guess import swing_path
 from .shooting import ShootingProblem
-from .solver import Iterate, ShootingSolver
-from .trajectory import Trajectory, sample_trajectory
-from .verification import Verification, verify
+from .solver import Iterate, SolverOutcome
+from .solvers import make_solver
+from .trajectory import sample_trajectory
+from .verification import verify
 
 __all__ = [
     "BoundaryPair",
@@ -37,28 +41,6 @@ __all__ = [
     "composition_problem",
     "make_candidate",
 ]
-
-
-class CandidateStatus(StrEnum):
-    """How a candidate's optimisation ended."""
-
-    #: Converged and verified.
-    OPTIMAL = "optimal"
-    #: The solver failed (iteration limit, infeasible, non-finite) or verification failed.
-    FAILED = "failed"
-    #: Closed before it ended (by the caller, or when a run stops).
-    STOPPED = "stopped"
-    #: Discarded by the pruning manager.
-    PRUNED = "pruned"
-
-
-class BoundaryPair(StrEnum):
-    """Which of step B's boundary pairs a candidate starts from (see :func:`composition_problem`)."""
-
-    #: The IK pair with the smallest velocity-limited travel time.
-    FASTEST = "fastest"
-    #: The fastest pair whose straight joint-space line clears the obstacles.
-    CLEAR = "clear"
 
 
 @dataclass(frozen=True)
@@ -76,92 +58,6 @@ class CandidateSpec:
         """The composition's name, suffixed ``+clear`` for its clear boundary pair."""
         name = self.composition.name
         return name if self.boundary_pair == BoundaryPair.FASTEST else f"{name}+{self.boundary_pair}"
-
-
-@dataclass(frozen=True, kw_only=True)
-class CandidateResult:
-    """How one candidate's optimisation ended (SPEC §7's per-candidate record).
-
-    ``name`` names the candidate (unique in a run), ``composition`` its composition and
-    ``boundary_pair`` the boundary pair it started from. ``cost`` in its unit [s], ``tf`` [s],
-    ``cost_history`` and ``violation_history`` the cost and scaled constraint violation after
-    every iteration, ``seconds`` spent in the solver and in verification. ``cost_bound`` is the
-    problem's lower bound on the cost (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`).
-    ``y`` is the last scaled decision vector and ``waypoints`` the joint-space path of the initial
-    guess it is scaled by. An optimal result also carries what the report needs, in SI units:
-    ``trajectory``, the plan sampled at every integration sub-step, and ``urdf``, the robot's URDF.
-    """
-
-    name: str
-    dof: int
-    status: CandidateStatus
-    reason: str
-    iterations: int = 0
-    seconds: float = 0.0
-    cost: float = float("nan")
-    tf: float = float("nan")
-    constraint_violation: float = float("nan")
-    cost_history: tuple[float, ...] = ()
-    violation_history: tuple[float, ...] = ()
-    #: Per iteration, how many times the sub-steps had been refined (0: the first solve).
-    refinement_history: tuple[int, ...] = ()
-    verification: Verification | None = None
-    substeps: int = 0
-    pruned_at_iteration: int | None = None
-    cost_bound: float = 0.0
-    composition: str = ""
-    boundary_pair: BoundaryPair = BoundaryPair.FASTEST
-    #: The rest configurations it moves between [rad | m] (empty if it never started).
-    q_start: tuple[float, ...] = ()
-    q_goal: tuple[float, ...] = ()
-    y: np.ndarray | None = field(default=None, repr=False, compare=False)
-    waypoints: np.ndarray | None = field(default=None, repr=False, compare=False)
-    trajectory: Trajectory | None = field(default=None, repr=False, compare=False)
-    urdf: str | None = field(default=None, repr=False, compare=False)
-    #: The drives' armature and friction, which URDF cannot hold (:meth:`RobotModel.drive`).
-    drive: dict | None = field(default=None, repr=False, compare=False)
-
-    @classmethod
-    def never_started(cls, name: str, reason: str = "stopped before it started") -> CandidateResult:
-        """The result of a candidate stopped before its first iteration."""
-        return cls(name=name, dof=0, status=CandidateStatus.STOPPED, reason=reason, cost_bound=float("nan"))
-
-    def to_json(self) -> dict:
-        return {
-            "composition": self.composition or self.name,
-            "candidate": self.name,
-            "boundary_pair": str(self.boundary_pair),
-            "dof": self.dof,
-            "q_start": list(self.q_start),
-            "q_goal": list(self.q_goal),
-            "status": str(self.status),
-            "reason": self.reason,
-            "iterations": self.iterations,
-            "seconds": round(self.seconds, 4),
-            "cost": _finite(self.cost),
-            "tf": _finite(self.tf),
-            "constraint_violation": _finite(self.constraint_violation),
-            "pruned_at_iteration": self.pruned_at_iteration,
-            "cost_bound": _finite(self.cost_bound),
-            "substeps": self.substeps,
-            "verification": self.verification.to_json() if self.verification else None,
-            "cost_history": [_finite(c) for c in self.cost_history],
-            "violation_history": [_finite(c) for c in self.violation_history],
-            "refinement_history": list(self.refinement_history),
-        }
-
-    def pruned(self, iteration: int, reason: str = "") -> CandidateResult:
-        """This result, pruned at ``iteration`` for ``reason`` (which rule, which bound or ratio)."""
-        return replace(
-            self,
-            status=CandidateStatus.PRUNED,
-            reason=f"pruned at iteration {iteration}" + (f" by the {reason}" if reason else ""),
-            pruned_at_iteration=iteration,
-        )
-
-
-def _finite(value: float) -> float | None:
-    return float(value) if value is not None and np.isfinite(value) else None
 
 
 class Candidate:
@@ -224,7 +120,7 @@ class Candidate:
         self.violations: list[float] = []
         self.refinements: list[int] = []
         self.last: Iterate | None = None
-        self._generator: Iterator[Iterate] | None = None
+        self._generator: Generator[Iterate, None, None] | None = None
         self._seconds = 0.0
         self._note = ""
 
@@ -243,6 +139,7 @@ class Candidate:
     def solve(self) -> CandidateResult:
         for _ in self.iterate():
             pass
+        assert self.result is not None  # set before the generator ends
         return self.result
 
     def close(self) -> None:
@@ -252,9 +149,11 @@ class Candidate:
         if self.result is None:
             self._finish(CandidateStatus.STOPPED, "closed before convergence" + self._note, None)
 
-    def _solve(self, problem: ShootingProblem, y0, offset: int, attempt: int):
+    def _solve(
+        self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int
+    ) -> Generator[Iterate, None, SolverOutcome]:
         """One solver run, its iterates yielded; returns its outcome."""
-        solver = ShootingSolver(problem, y0, jacobian=self.jacobian, iteration_offset=offset)
+        solver = make_solver(problem.settings.solver, problem, y0, jacobian=self.jacobian, iteration_offset=offset)
         try:
             for it in solver.iterate():
                 it = replace(it, refinement=attempt)
@@ -266,15 +165,19 @@ class Candidate:
         finally:
             solver.close()
             self._seconds += solver.outcome.seconds if solver.outcome else 0.0
-        if solver.outcome.final is not None:
-            self.last = replace(solver.outcome.final, refinement=attempt)
-        return solver.outcome
+        outcome = solver.outcome
+        assert outcome is not None  # set once iterate() has returned (the Solver contract)
+        if outcome.final is not None:
+            self.last = replace(outcome.final, refinement=attempt)
+        return outcome
 
-    def _run(self) -> Iterator[Iterate]:
+    def _run(self) -> Generator[Iterate, None, None]:
         """Solve, swing once if the first solve fails, verify, refine. :attr:`problem` always
         holds the problem being solved, so that a result taken on :meth:`close` unpacks its
         ``y`` with the right sub-steps and guess."""
-        y0, offset, verification, cold, refined = None, 0, None, False, 0
+        y0: np.ndarray | None = None
+        verification: Verification | None = None
+        offset, cold, refined = 0, False, 0
         for attempt in range(self.max_refinements + 2):  # + 1: the cold solve after a crossing
             outcome = yield from self._solve_restarting(self.problem, y0, offset, refined)
             swung = (
@@ -291,8 +194,10 @@ class Candidate:
                 held = _held_beyond_share(self.problem) if outcome.status == "failed" else ""
                 self._finish(CandidateStatus(outcome.status), outcome.reason + self._note + held, None)
                 return
+            final = outcome.final
+            assert final is not None  # an optimal solve ends on an iterate
             start = time.perf_counter()
-            previous, verification = verification, verify(self.problem, outcome.final.y)
+            previous, verification = verification, verify(self.problem, final.y)
             self._seconds += time.perf_counter() - start
             if verification.passed:
                 self._finish(CandidateStatus.OPTIMAL, outcome.reason + self._note, verification)
@@ -300,7 +205,7 @@ class Candidate:
             crossing = _crossing(previous, verification)
             if refined == self.max_refinements or (crossing and cold):
                 break
-            offset = outcome.final.iteration
+            offset = final.iteration
             if crossing:  # the same sub-steps, from the first guess
                 cold, y0, verification = True, None, None
                 substeps = self.problem.substeps
@@ -309,10 +214,13 @@ class Candidate:
                 )
                 continue
             self.problem = self.problem.refined(2 * self.problem.substeps)
-            y0, refined = outcome.final.y, refined + 1
+            y0, refined = final.y, refined + 1
+        assert verification is not None  # the loop is only left by a break, after a failed verification
         self._finish(CandidateStatus.FAILED, _verification_failure(verification) + self._note, verification)
 
-    def _solve_restarting(self, problem: ShootingProblem, y0, offset: int, attempt: int):
+    def _solve_restarting(
+        self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int
+    ) -> Generator[Iterate, None, SolverOutcome]:
         """:meth:`_solve`, and once more from where it stopped if it hit the iteration limit
         (``restart``)."""
         outcome = yield from self._solve(problem, y0, offset, attempt)
@@ -323,6 +231,10 @@ class Candidate:
     def _finish(self, status: CandidateStatus, reason: str, verification: Verification | None):
         last, problem = self.last, self.problem
         optimal = status == CandidateStatus.OPTIMAL
+        trajectory = None
+        if optimal:
+            assert last is not None  # an optimal solve ends on an iterate
+            trajectory = sample_trajectory(problem, last.y)
         self.result = CandidateResult(
             name=self.name,
             dof=problem.nv,
@@ -345,7 +257,7 @@ class Candidate:
             q_goal=tuple(float(v) for v in problem.q_goal),
             y=last.y if last else None,
             waypoints=problem.waypoints,
-            trajectory=sample_trajectory(problem, last.y) if optimal else None,
+            trajectory=trajectory,
             urdf=problem.robot.urdf if optimal else None,
             drive=problem.robot.drive() if optimal else None,
         )

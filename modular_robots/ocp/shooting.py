@@ -34,10 +34,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from ..collision import CollisionModel, SphereObstacle
-from ..exceptions import ModularRobotsError
+from ..collision import CollisionModel
+from ..costs import COSTS, Cost
+from ..exceptions import ModularRobotsError, ProblemError
+from ..obstacles import Obstacle
 from ..robot import RobotModel
-from ..scenario import COSTS, OptimizerSettings
+from ..scenario import OptimizerSettings
 from .guess import detour_path, path_times
 from .hessian import kinematic_hessians, rnea_curvature, torque_hessians
 from .transcription import Propagation, positive_or_one, transcription
@@ -89,26 +91,28 @@ class ShootingProblem:
     def __init__(
         self,
         robot: RobotModel,
-        q_start: Sequence[float],
-        q_goal: Sequence[float],
-        obstacles: Sequence[SphereObstacle] = (),
-        cost: str = "time",
+        q_start: Sequence[float] | np.ndarray,
+        q_goal: Sequence[float] | np.ndarray,
+        obstacles: Sequence[Obstacle] = (),
+        cost: str | Cost = "time",
         settings: OptimizerSettings = OptimizerSettings(),
         substeps: int | None = None,
         waypoints: np.ndarray | None = None,
     ):
         if robot.nq != robot.nv:
-            raise ValueError(
+            raise ProblemError(
                 f"robot {robot.name!r}: nq = {robot.nq} != nv = {robot.nv}; only joints "
                 f"whose configuration is their coordinate (revolute, prismatic) are supported"
             )
         if settings.nodes < 3:
-            raise ValueError(f"nodes must be >= 3 (two or more intervals), got {settings.nodes}")
-        if cost not in COSTS:
-            raise ValueError(f"unknown cost {cost!r}; expected one of {list(COSTS)}")
+            raise ProblemError(f"nodes must be >= 3 (two or more intervals), got {settings.nodes}")
+        if isinstance(cost, str) and cost not in COSTS:
+            raise ProblemError(f"unknown cost {cost!r}; expected one of {list(COSTS)}")
         self.robot = robot
         self.settings = settings
-        self.cost_name = cost
+        #: What the problem minimises (:mod:`~modular_robots.costs`).
+        self.objective: Cost = COSTS[cost] if isinstance(cost, str) else cost
+        self.cost_name = self.objective.name
         self.obstacles = tuple(obstacles)
         self.transcription = transcription(settings.transcription)
         self.intervals = settings.nodes - 1
@@ -129,15 +133,12 @@ class ShootingProblem:
         if self.collision is not None:
             for label, q in (("q_start", self.q_start), ("q_goal", self.q_goal)):
                 if self.collision.min_distance(q) < 0.0:
-                    raise ValueError(f"{label} is in collision with an obstacle")
+                    raise ProblemError(f"{label} is in collision with an obstacle")
         N = self.intervals
-        #: A lower bound of the cost [s], valid by construction: for ``time``, no plan within its
-        #: velocity bounds is faster than the busiest joint moving at its bound all the way
-        #: (``RobotModel.travel_time_bound``);
-        #: 0 for ``effort``. Used by step D to prune a candidate before it is solved.
-        self.cost_bound = (
-            robot.travel_time_bound(self.q_start, self.q_goal, self.velocity_bound) if cost == "time" else 0.0
-        )
+        #: A lower bound of the cost [s], valid by construction (the cost's
+        #: :meth:`~modular_robots.costs.Cost.lower_bound`). Used by step D to prune a candidate
+        #: before it is solved.
+        self.cost_bound = self.objective.lower_bound(robot, self.q_start, self.q_goal, self.velocity_bound)
         self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
         self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
 
@@ -193,7 +194,7 @@ class ShootingProblem:
             self.q_start,
             self.q_goal,
             self.obstacles,
-            self.cost_name,
+            self.objective,
             self.settings,
             substeps or self.substeps,
             self.waypoints if waypoints is None else waypoints,
@@ -202,10 +203,10 @@ class ShootingProblem:
     def _configuration(self, q, label) -> np.ndarray:
         q = np.asarray(q, dtype=float).reshape(-1)
         if q.shape != (self.nv,) or not np.all(np.isfinite(q)):
-            raise ValueError(f"{label} must be {self.nv} finite joint values, got {q.tolist()}")
+            raise ProblemError(f"{label} must be {self.nv} finite joint values, got {q.tolist()}")
         lo, hi = self.robot.lower, self.robot.upper
         if np.any(q < lo - 1e-9) or np.any(q > hi + 1e-9):
-            raise ValueError(f"{label} = {np.round(q, 6).tolist()} is outside the joint limits")
+            raise ProblemError(f"{label} = {np.round(q, 6).tolist()} is outside the joint limits")
         return q
 
     def _initial_motion(self):
@@ -254,7 +255,10 @@ class ShootingProblem:
         blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S, nv), ("clearance", S, pairs)]
         if not self.transcription.controls_are_torques:
             blocks.append(("torque", S + 1, nv))
-        rows, lower, upper, scale = {}, [], [], []
+        rows: dict[str, np.ndarray] = {}
+        lower_parts: list[np.ndarray] = []
+        upper_parts: list[np.ndarray] = []
+        scale_parts: list[np.ndarray] = []
         start = 0
         for name, k, r in blocks:
             rows[name] = start + np.arange(N * k * r).reshape(N, k, r)
@@ -277,19 +281,19 @@ class ShootingProblem:
             else:
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.effort_bound, self.effort_bound))
                 sc = np.broadcast_to(self.tau_scale, (N, k, r))
-            lower.append(np.ravel(lo))
-            upper.append(np.ravel(hi))
-            scale.append(np.ravel(sc))
-        lower, upper, scale = (np.concatenate(v) for v in (lower, upper, scale))
+            lower_parts.append(np.ravel(lo))
+            upper_parts.append(np.ravel(hi))
+            scale_parts.append(np.ravel(sc))
+        lower, upper, scale = (np.concatenate(v) for v in (lower_parts, upper_parts, scale_parts))
         self._rows = rows
         self.row_scale = scale
         # Entries in evaluation order: block local Jacobians, then continuity's -I on s_{m+1}.
-        entry_rows = [np.broadcast_to(rows[name][..., None], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
-        entry_cols = [np.broadcast_to(cols[:, None, None, :], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
+        row_parts = [np.broadcast_to(rows[name][..., None], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
+        col_parts = [np.broadcast_to(cols[:, None, None, :], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
         next_cols = np.array([1 + m * n + np.arange(n) if m < N - 1 else np.full(n, -1) for m in range(N)])
-        entry_rows.append(rows["continuity"][:, 0, :].ravel())
-        entry_cols.append(next_cols.ravel())
-        entry_rows, entry_cols = np.concatenate(entry_rows), np.concatenate(entry_cols)
+        row_parts.append(rows["continuity"][:, 0, :].ravel())
+        col_parts.append(next_cols.ravel())
+        entry_rows, entry_cols = np.concatenate(row_parts), np.concatenate(col_parts)
         # Drop clearance rows of the fixed start point and rows without a finite bound.
         keep_row = np.isfinite(lower) | np.isfinite(upper)
         if pairs:
@@ -345,9 +349,10 @@ class ShootingProblem:
         if not self.transcription.controls_are_torques:
             values.append(prop.torques.ravel())
         c = (np.concatenate(values) / self.row_scale)[self._keep_row]
-        cost, cost_grad = self._cost(tf, prop, derivatives)
+        cost, cost_grad = self.objective.evaluate(self, tf, prop, derivatives)
         jac = None
         if derivatives:
+            assert prop.state_sens is not None and prop.torque_sens is not None and middle_sens is not None
             blocks = [prop.state_sens[:, S], prop.state_sens[:, 1:S], middle_sens]
             if self.collision is not None:
                 blocks.append(clear_grad.reshape(N, S, -1, nv) @ prop.state_sens[:, :S, :nv])
@@ -368,7 +373,7 @@ class ShootingProblem:
         ``midpoint``, ``clearance``, ``torque``), in order."""
         unknown = set(blocks) - set(self._rows)
         if unknown:
-            raise ValueError(f"unknown constraint blocks {sorted(unknown)}; expected some of {list(self._rows)}")
+            raise ProblemError(f"unknown constraint blocks {sorted(unknown)}; expected some of {list(self._rows)}")
         return np.flatnonzero(np.isin(self._block_of_row, blocks))
 
     @property
@@ -384,13 +389,12 @@ class ShootingProblem:
         if not self.has_exact_hessian:
             raise NotImplementedError(f"no exact Hessian for the {self.transcription.name} transcription")
         if np.any(self._block_of_row[rows] == "clearance"):
-            raise ValueError("the clearance rows have no exact Hessian")
+            raise ProblemError("the clearance rows have no exact Hessian")
         N, S, nv = self.intervals, self.substeps, self.nv
         mu = np.zeros(len(self.row_scale))
         mu[np.flatnonzero(self._keep_row)[rows]] = multipliers
         mu /= self.row_scale
-        rows = self._rows
-        cont, path, mid, tau = (mu[rows[k]] for k in ("continuity", "path", "midpoint", "torque"))
+        cont, path, mid, tau = (mu[self._rows[k]] for k in ("continuity", "path", "midpoint", "torque"))
         tf, _, controls = self.unpack(y)
         prop = self.evaluate(y, derivatives=False).propagation
         weight_q, weight_v = np.zeros((N, S + 1, nv)), np.zeros((N, S + 1, nv))
@@ -438,6 +442,7 @@ class ShootingProblem:
         middle = 0.5 * (q[:, :S] + q[:, 1:]) + 0.125 * h * (v[:, :S] - v[:, 1:])
         if not derivatives:
             return middle, None
+        assert prop.state_sens is not None, "propagated without sensitivities"
         dq, dv = prop.state_sens[:, :, :nv], prop.state_sens[:, :, nv:]
         sens = 0.5 * (dq[:, :S] + dq[:, 1:]) + 0.125 * h * (dv[:, :S] - dv[:, 1:])
         sens[..., -1] += 0.125 * (v[:, :S] - v[:, 1:]) / (N * S)
@@ -448,25 +453,11 @@ class ShootingProblem:
             return np.zeros((len(qs), 0)), (np.zeros((len(qs), 0, self.nv)) if derivatives else None)
         return self.collision.closest_many(qs, derivatives)
 
-    def _cost(self, tf: float, prop: Propagation, derivatives: bool):
-        grad = np.zeros(self.n_variables) if derivatives else None
-        if self.cost_name == "time":
-            if derivatives:
-                grad[0] = 1.0
-            return tf / self.tf_guess, grad
-        N, S = self.intervals, self.substeps
-        weights = np.full(S + 1, 1.0 / (N * S))
-        weights[[0, -1]] *= 0.5  # trapezoid in normalised time; dt = tf * weight
-        ratio = prop.torques / self.tau_scale
-        per_interval = np.einsum("j,mjk->m", weights, ratio**2)
-        cost = tf * per_interval.sum() / self.tf_guess
-        if derivatives:
-            local = 2.0 * tf * np.einsum("j,mjk,mjkp->mp", weights, ratio / self.tau_scale, prop.torque_sens)
-            local[:, -1] += per_interval
-            mask = self._cols >= 0
-            np.add.at(grad, self._cols[mask], local[mask])
-            grad *= self.variable_scale / self.tf_guess
-        return cost, grad
+    @property
+    def interval_columns(self) -> np.ndarray:
+        """``(N, p)``: the variable of each of interval ``m``'s parameters ``(s_m, u_m, tf)``; -1
+        for the fixed ``s_0``."""
+        return self._cols
 
     def _interval_columns(self, m: int) -> np.ndarray:
         """Global columns of interval ``m``'s parameters ``(s_m, u_m, tf)``; -1 for fixed ``s_0``."""
@@ -479,7 +470,9 @@ class ShootingProblem:
         return self.evaluate(y, derivatives=False).cost
 
     def cost_gradient(self, y: np.ndarray) -> np.ndarray:
-        return self.evaluate(y).cost_gradient
+        gradient = self.evaluate(y).cost_gradient
+        assert gradient is not None  # evaluated with derivatives
+        return gradient
 
     def constraints(self, y: np.ndarray) -> np.ndarray:
         return self.evaluate(y, derivatives=False).constraints

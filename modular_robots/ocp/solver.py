@@ -9,11 +9,12 @@ problem's Pinocchio data is never shared. :meth:`ShootingSolver.solve` runs to t
 calling thread, without the hand-over per iteration.
 A solver failure never raises into the caller: the generator ends and :attr:`outcome` says why.
 
-The thread that runs trust-constr is marked for :mod:`~modular_robots.ocp.trust_constr`, which
-takes over seven parts of trust-constr there: its projections, canonical constraints and barrier
+The thread that runs trust-constr is marked for :mod:`~modular_robots.ocp._scipy`, whose
+replacements (installed before the first solve, where the SciPy is one they are tested on) take
+over seven parts of trust-constr there: its projections, canonical constraints and barrier
 Jacobian, computed from the problem's structure, its barrier function and box intersections,
 vectorised, the quasi-Newton update's transposed products, and its SQP loop, which repeats a
-refused step's second-order correction (:mod:`~modular_robots.ocp.sqp`).
+refused step's second-order correction (:mod:`~modular_robots.ocp._scipy.sqp`).
 """
 
 from __future__ import annotations
@@ -29,8 +30,8 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
 
+from ._scipy import install, solver_thread
 from .shooting import ShootingProblem
-from .trust_constr import solver_thread
 
 __all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS", "ITERATION_LIMIT"]
 
@@ -157,6 +158,7 @@ class ShootingSolver:
         self._stop = False
         self._direct = False
         self._seconds = 0.0
+        self._clock = 0.0  # perf_counter() when the solver last took over from the caller
 
     # -- public ------------------------------------------------------------------------------
     def iterate(self) -> Iterator[Iterate]:
@@ -244,7 +246,7 @@ class ShootingSolver:
             try:
                 return self._to_caller.get(timeout=1.0)
             except queue.Empty:
-                if not self._thread.is_alive() and self._to_caller.empty():
+                if (self._thread is None or not self._thread.is_alive()) and self._to_caller.empty():
                     return self._outcome_without_result("failed", "the solver thread ended without an outcome")
 
     def _posted(self) -> SolverOutcome | None:
@@ -288,6 +290,7 @@ class ShootingSolver:
         problem = self.problem
         self._clock = time.perf_counter()
         try:
+            install()  # the replacements of parts of trust-constr, once per process
             with solver_thread(problem.n_variables):
                 result = self._minimize()
         except Exception as exc:
@@ -335,9 +338,8 @@ class ShootingSolver:
     def _minimize(self):
         problem = self.problem
         exact = self.jacobian == "exact"
-        n = problem.n_variables
-        zero = sparse.csr_matrix((n, n))
-        objective_hessian = (lambda y: zero) if exact and problem.cost_name == "time" else _SR1()
+        exact_objective = problem.objective.hessian(problem) if exact else None
+        objective_hessian = exact_objective if exact_objective is not None else _SR1()
 
         # With exact Jacobians every point is evaluated with its derivatives at once: trust-constr
         # asks for them at nearly every point whose values it asked for, and a second pass would
@@ -414,6 +416,12 @@ def _rows_constraint(problem: ShootingProblem, rows: np.ndarray, hess) -> Nonlin
         lambda y: problem.evaluate(y).constraints[rows],
         problem.constraint_lower[rows],
         problem.constraint_upper[rows],
-        jac=lambda y: problem.evaluate(y).jacobian[rows],
+        jac=lambda y: _jacobian(problem, y)[rows],
         hess=hess,
     )
+
+
+def _jacobian(problem: ShootingProblem, y: np.ndarray) -> sparse.csr_matrix:
+    jacobian = problem.evaluate(y).jacobian
+    assert jacobian is not None  # evaluated with derivatives
+    return jacobian

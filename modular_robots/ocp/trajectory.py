@@ -1,12 +1,5 @@
-"""A plan as a robot consumes it: rows under the *acceleration contract* (SPEC §7), and their exact
-resampling at a controller rate.
-
-**The acceleration contract.** On ``[t_i, t_{i+1})`` the joint acceleration is ``qdd_i``,
-constant, so each row follows exactly from the one before
-(``q_{i+1} = q_i + qd_i h + qdd_i h^2 / 2``, ``qd_{i+1} = qd_i + qdd_i h``), and ``tau_i`` is the
-inverse dynamics at ``(q_i, qd_i, qdd_i)`` with the drive's armature and friction: the torque the
-drive must deliver at that instant. Where the acceleration jumps, a row carries the value that starts there;
-the last row, at ``tf``, the robot at rest (``qdd = 0``, the holding torque).
+"""Sampling a shooting solution into a plan (:class:`~modular_robots.plan.trajectory.Trajectory`)
+under the acceleration contract (SPEC §7, :mod:`modular_robots.plan.trajectory`).
 
 * The inverse transcription's plan *is* such a motion (a parabola per interval), so its rows are
   the integration sub-steps and the contract holds to rounding.
@@ -17,177 +10,24 @@ the last row, at ``tf``, the robot at rest (``qdd = 0``, the holding torque).
   torque): the rows follow the plan's velocities exactly and its positions to about
   ``|jerk| h^3 / 12`` per row.
 
-Because the rows define the motion exactly, :meth:`Trajectory.at` evaluates the plan at any time;
-:func:`controller_rate` uses it for the *zero-order-hold contract* of a controller-rate file.
+The plan's value type and its controller-rate resampling live in :mod:`modular_robots.plan`;
+they are re-exported here.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from ..plan.trajectory import MAX_ROWS, Trajectory, controller_rate, joint_trajectory
 from ..robot import RobotModel
 
 __all__ = ["Trajectory", "sample_trajectory", "controller_rate", "joint_trajectory", "FORWARD_ROW_STEP", "MAX_ROWS"]
 
 #: Largest time between two rows of a forward-transcription plan [s].
 FORWARD_ROW_STEP = 1e-3
-#: The most rows :func:`controller_rate` makes (1000 s of plan at 1 kHz): each row is an inverse
-#: dynamics call and ~0.5 kB of CSV, so more would take minutes, gigabytes and a controller no use.
-MAX_ROWS = 1_000_000
-#: How far a row may be from the one before under the acceleration contract, relative to the
-#: terms of the step: the rows are chained exactly, so only rounding separates them.
-CONTRACT_TOLERANCE = 1e-9
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """A plan sampled under the acceleration contract (module docstring).
-
-    ``t`` (K,) [s]; joint positions ``q``, velocities ``qd``, accelerations ``qdd`` and torques
-    ``tau`` (K, nv) [rad, m; /s; /s^2; N m, N]; ``tool`` (K, 3) the tool position [m] in the base
-    frame. ``velocity_limit`` and ``effort_limit`` (nv,) are the robot's limits, ``velocity_bound``
-    and ``effort_bound`` the ones the plan was optimised within (the limits times the scenario's
-    margins); all four are for plots and reports.
-    """
-
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    tau: np.ndarray
-    tool: np.ndarray
-    velocity_limit: np.ndarray | None = None
-    effort_limit: np.ndarray | None = None
-    velocity_bound: np.ndarray | None = None
-    effort_bound: np.ndarray | None = None
-
-    @property
-    def nv(self) -> int:
-        return self.q.shape[1]
-
-    def header(self, accelerations: bool = True) -> list[str]:
-        """``t,q1..qn,qd1..qdn[,qdd1..qddn],tau1..taun,x,y,z``."""
-        groups = ("q", "qd", "qdd", "tau") if accelerations else ("q", "qd", "tau")
-        return ["t", *self.header_names(self.nv, groups), "x", "y", "z"]
-
-    def table(self, accelerations: bool = True) -> np.ndarray:
-        columns = [self.t, self.q, self.qd, self.qdd, self.tau, self.tool]
-        return np.column_stack(columns if accelerations else columns[:3] + columns[4:])
-
-    def write_csv(self, path, accelerations: bool = True) -> None:
-        """Write the rows as CSV (SPEC §7's ``trajectory.csv``), every number to full precision.
-        Without ``accelerations`` the file has no ``qdd`` columns and follows the
-        zero-order-hold contract instead (see :func:`controller_rate`)."""
-        np.savetxt(
-            path,
-            self.table(accelerations),
-            delimiter=",",
-            header=",".join(self.header(accelerations)),
-            comments="",
-            fmt="%.17g",
-        )
-
-    @classmethod
-    def read_csv(cls, path) -> Trajectory:
-        """Read a file written by :meth:`write_csv` with its ``qdd`` columns (the acceleration
-        contract).
-
-        Raises
-        ------
-        ValueError
-            Naming the file, the row and the column, for a header other than
-            ``t,q1..qn,qd1..qdn,qdd1..qddn,tau1..taun,x,y,z``, a cell that is not a finite number,
-            fewer than two rows, times that do not start at 0 and increase, or a row that does not
-            follow from the one before under the acceleration contract (an edited file).
-        """
-        with open(path, encoding="utf-8") as f:
-            lines = f.read().splitlines()
-        header = lines[0].strip().split(",") if lines else []
-        nv = (len(header) - 4) // 4
-        if nv < 1 or header != ["t", *Trajectory.header_names(nv), "x", "y", "z"]:
-            raise ValueError(
-                f"{path}:1: expected the header t,q1..qn,qd1..qdn,qdd1..qddn,tau1..taun,x,y,z, "
-                f"got {','.join(header)[:200]!r}"
-            )
-        rows = []
-        for number, line in enumerate(lines[1:], start=2):
-            cells = line.split(",")
-            if len(cells) != len(header):
-                raise ValueError(f"{path}:{number}: expected {len(header)} values, got {len(cells)}")
-            try:
-                row = [float(c) for c in cells]
-            except ValueError:
-                raise ValueError(f"{path}:{number}: expected numbers, got {line[:80]!r}") from None
-            bad = [header[k] for k, v in enumerate(row) if not math.isfinite(v)]
-            if bad:
-                raise ValueError(
-                    f"{path}:{number}: column {bad[0]}: expected a finite number, got {row[header.index(bad[0])]}"
-                )
-            rows.append(row)
-        if len(rows) < 2:
-            raise ValueError(f"{path}: expected at least 2 rows (t = 0 and t = tf), got {len(rows)}")
-        table = np.array(rows)
-        steps = np.diff(table[:, 0])
-        if table[0, 0] != 0.0 or not np.all(steps > 0.0):
-            row = 2 if table[0, 0] != 0.0 else int(np.argmax(steps <= 0.0)) + 3
-            raise ValueError(f"{path}:{row}: column t: expected times from 0 that increase row by row")
-        blocks = [table[:, 1 + k * nv : 1 + (k + 1) * nv] for k in range(4)]
-        _check_contract(path, table[:, 0], *blocks[:3])
-        return cls(table[:, 0], *blocks, table[:, -3:])
-
-    @staticmethod
-    def header_names(nv: int, groups=("q", "qd", "qdd", "tau")) -> list[str]:
-        return [f"{g}{i}" for g in groups for i in range(1, nv + 1)]
-
-    def at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(q, qd, qdd)`` of the plan at ``times`` [s], exactly, from the contract: the row at or
-        before each time and its constant acceleration (right-hand values at the rows)."""
-        times = np.clip(np.asarray(times, dtype=float), self.t[0], self.t[-1])
-        i = np.clip(np.searchsorted(self.t, times, side="right") - 1, 0, len(self.t) - 1)
-        s = (times - self.t[i])[:, None]
-        qdd = self.qdd[i]
-        return self.q[i] + self.qd[i] * s + 0.5 * qdd * s * s, self.qd[i] + qdd * s, qdd
-
-
-def _check_contract(path, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
-    """Raise ``ValueError`` naming the first row of the file ``path`` whose ``q`` or ``qd`` do not
-    follow from the row before under the acceleration contract (beyond rounding)."""
-    h = np.diff(t)[:, None]
-    steps = (
-        ("q", q[:-1] + qd[:-1] * h + 0.5 * qdd[:-1] * h * h, q[1:], abs(qd[:-1] * h) + abs(0.5 * qdd[:-1] * h * h)),
-        ("qd", qd[:-1] + qdd[:-1] * h, qd[1:], abs(qdd[:-1] * h)),
-    )
-    for group, expected, got, step in steps:
-        bad = np.abs(got - expected) > CONTRACT_TOLERANCE * (1.0 + np.abs(got) + np.abs(expected) + step)
-        if bad.any():
-            i, j = np.argwhere(bad)[0]
-            raise ValueError(
-                f"{path}:{i + 3}: column {group}{j + 1}: expected {expected[i, j]:.10g} (the row before under the "
-                f"acceleration contract), got {got[i, j]:.10g}"
-            )
-
-
-def joint_trajectory(trajectory: Trajectory, joint_names: list[str]) -> dict:
-    """``trajectory`` shaped like ROS ``trajectory_msgs/JointTrajectory`` (as a JSON-ready dict):
-    ``joint_names`` and ``points`` with ``positions``, ``velocities``, ``accelerations``,
-    ``effort`` and ``time_from_start`` as ``{sec, nanosec}``."""
-    points = []
-    for i, t in enumerate(trajectory.t):
-        nanoseconds = round(float(t) * 1e9)
-        points.append(
-            {
-                "positions": trajectory.q[i].tolist(),
-                "velocities": trajectory.qd[i].tolist(),
-                "accelerations": trajectory.qdd[i].tolist(),
-                "effort": trajectory.tau[i].tolist(),
-                "time_from_start": {"sec": nanoseconds // 1_000_000_000, "nanosec": nanoseconds % 1_000_000_000},
-            }
-        )
-    return {"joint_names": list(joint_names), "points": points}
 
 
 def sample_trajectory(problem, y: np.ndarray) -> Trajectory:
@@ -246,44 +86,3 @@ def _dense_velocities(robot: RobotModel, tr, nodes: np.ndarray, controls: np.nda
         velocities.append(sol.y.T[:, nv:] if sol.success else np.full((k, nv), np.nan))
     t = np.concatenate([*times, [len(controls) * h_interval]])
     return t, np.vstack([*velocities, nodes[-1, nv:]])
-
-
-def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> Trajectory:
-    """The plan at a controller's rate [Hz]: rows every ``1 / rate`` s from 0 to ``tf`` (and one at
-    ``tf``), positions, velocities and accelerations exact (:meth:`Trajectory.at`).
-
-    Its torques follow the *zero-order-hold contract* (SPEC §7): ``tau_i``, held from ``t_i`` to
-    ``t_{i+1}``, drives the robot from row ``i`` to row ``i + 1``. It is the inverse dynamics at row
-    ``i`` with the mean acceleration to the next row, so that a torque held across an instant
-    where the plan's acceleration jumps still lands on the next row's velocity. ``qdd`` holds the
-    plan's own acceleration at each row.
-    """
-    if not math.isfinite(rate) or rate <= 0.0:
-        raise ValueError(f"rate: expected a positive number of rows per second, got {rate}")
-    tf = float(trajectory.t[-1])
-    if tf * rate + 2 > MAX_ROWS:
-        raise ValueError(
-            f"rate: {rate:g} Hz over the plan's {tf:g} s makes {tf * rate + 1:.3g} rows; expected at most "
-            f"{MAX_ROWS:,} (a lower rate)"
-        )
-    count = math.floor(tf * rate + 1e-9)
-    t = np.arange(count + 1) / rate
-    if t[-1] < tf - 1e-12:
-        t = np.append(t, tf)
-    q, qd, qdd = trajectory.at(t)
-    h = np.diff(t)[:, None]
-    mean = np.vstack([(qd[1:] - qd[:-1]) / h, np.zeros(robot.nv)])
-    tau = robot.rnea(q, qd, mean)
-    tool = np.array([robot.tool_position(x) for x in q])
-    return Trajectory(
-        t,
-        q,
-        qd,
-        qdd,
-        tau,
-        tool,
-        trajectory.velocity_limit,
-        trajectory.effort_limit,
-        trajectory.velocity_bound,
-        trajectory.effort_bound,
-    )

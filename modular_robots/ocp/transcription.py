@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from ..exceptions import ProblemError
 from ..robot import RobotModel, symmetric_from_upper
 
 __all__ = ["Propagation", "Transcription", "ForwardDynamics", "InverseDynamics", "transcription"]
@@ -119,7 +120,7 @@ class ForwardDynamics(Transcription):
             sens = np.zeros((n_int, substeps + 1, n, p))
             sens[:, 0, :, :n] = np.eye(n)
         x = x0
-        X = sens[:, 0] if derivatives else None
+        X = sens[:, 0] if sens is not None else None
         for j in range(substeps):
             k1, K1 = self._f(robot, x, X, u, derivatives)
             x2 = x + 0.5 * h * k1
@@ -134,7 +135,7 @@ class ForwardDynamics(Transcription):
             k = (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
             x = x + h * k
             states[:, j + 1] = x
-            if derivatives:
+            if sens is not None:
                 X = _stage(X, (K1 + 2.0 * K2 + 2.0 * K3 + K4) / 6.0, k, h, dh)
                 sens[:, j + 1] = X
         torques = np.repeat(u[:, None, :], substeps + 1, axis=1)
@@ -260,4 +261,4 @@ def transcription(name: str) -> Transcription:
     try:
         return _TRANSCRIPTIONS[name]()
     except KeyError:
-        raise ValueError(f"unknown transcription {name!r}; expected one of {sorted(_TRANSCRIPTIONS)}") from None
+        raise ProblemError(f"unknown transcription {name!r}; expected one of {sorted(_TRANSCRIPTIONS)}") from None

@@ -16,86 +16,19 @@ a serial arm under gravity is an unstable open-loop system, so a long integratio
 compositions: velocity limits exceeded 857 times after 27 s over the whole motion; a scaled gap
 of 3.5e-3 over one 0.57 s interval of an arm with a light wrist, for a plan whose sub-steps each
 re-integrate to 1e-8). A robot follows a plan with feedback.
+
+The figures' value type and pass tolerances are :mod:`modular_robots.plan.verification`'s.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import numpy as np
 from scipy.integrate import DOP853
 
+from ..plan.verification import TERMINAL_TOLERANCE, Verification
 from .shooting import ShootingProblem
 
 __all__ = ["Verification", "verify", "TERMINAL_TOLERANCE"]
-
-#: Largest terminal tool-position error accepted without refinement [m] (SPEC §5: 1 cm).
-TERMINAL_TOLERANCE = 0.01
-#: Largest scaled defect of an interval: its sub-steps' re-integration gaps, summed.
-DEFECT_TOLERANCE = 1e-3
-#: Relative excess over a velocity or torque limit (or over a position limit, relative to the
-#: joint's range) still counted as "held" on the dense grid.
-LIMIT_TOLERANCE = 1e-3
-#: Penetration still counted as clear on the dense grid [m] (solver tolerance, not physics).
-CLEARANCE_TOLERANCE = 1e-5
-
-
-@dataclass(frozen=True)
-class Verification:
-    """Figures of a re-integrated trajectory.
-
-    ``terminal_error`` [m]: tool position at ``tf`` vs the goal's; ``terminal_speed``: largest
-    joint speed at ``tf``; ``max_defect``: largest over intervals of the summed scaled
-    gaps between each sub-step's re-integrated end and the plan (the next node for the last
-    sub-step), positions over half their range and velocities over their limit;
-    ``min_clearance`` [m]: smallest obstacle distance on the grid (inf without obstacles);
-    ``position_excess``: largest excursion beyond a position limit, relative to the joint's
-    range; ``velocity_ratio``, ``torque_ratio``: largest ``|value| / limit``; ``grid_points``: samples
-    checked; ``substeps``: RK4 sub-steps per interval of the solution; ``velocity_share``,
-    ``effort_share``: per joint, the largest ``|value| / limit`` on the grid (between the plan's
-    rows too, where a torque can exceed its value at the rows).
-    """
-
-    terminal_error: float
-    terminal_speed: float
-    max_defect: float
-    min_clearance: float
-    position_excess: float
-    velocity_ratio: float
-    torque_ratio: float
-    grid_points: int
-    substeps: int
-    velocity_share: tuple[float, ...] = ()
-    effort_share: tuple[float, ...] = ()
-
-    @property
-    def terminal_ok(self) -> bool:
-        return self.terminal_error <= TERMINAL_TOLERANCE
-
-    @property
-    def limits_ok(self) -> bool:
-        return (
-            self.position_excess <= LIMIT_TOLERANCE
-            and self.velocity_ratio <= 1.0 + LIMIT_TOLERANCE
-            and self.torque_ratio <= 1.0 + LIMIT_TOLERANCE
-        )
-
-    @property
-    def clearance_ok(self) -> bool:
-        return self.min_clearance >= -CLEARANCE_TOLERANCE
-
-    @property
-    def defect_ok(self) -> bool:
-        return self.max_defect <= DEFECT_TOLERANCE
-
-    @property
-    def passed(self) -> bool:
-        return self.terminal_ok and self.defect_ok and self.limits_ok and self.clearance_ok
-
-    def to_json(self) -> dict:
-        out = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(self).items()}
-        out["passed"] = self.passed
-        return out
 
 
 class _StackedDOP853(DOP853):

@@ -43,12 +43,40 @@
     return mesh;
   }
 
-  S.obstacles.forEach((o) => {
-    scene.add(sphere(o.radius, material(0xd9534f, { transparent: true, opacity: 0.6 }), o.center));
-    if (S.margin > 0) {
-      const shell = new THREE.MeshBasicMaterial({ color: 0xd9534f, wireframe: true, transparent: true, opacity: 0.2 });
-      scene.add(sphere(o.radius + S.margin, shell, o.center));
+  // a shape in the page's vocabulary (links and obstacles alike), posed by its column-major origin
+  function shapePart(shape, mat) {
+    const part = new THREE.Group();
+    part.matrixAutoUpdate = false;
+    part.matrix.fromArray(shape.origin);
+    if (shape.type === "capsule") {
+      const body = new THREE.Mesh(new THREE.CylinderGeometry(shape.radius, shape.radius, shape.length, 32), mat);
+      body.rotation.x = Math.PI / 2; // three's cylinder runs along y, URDF's along z
+      part.add(body);
+      part.add(sphere(shape.radius, mat, [0, 0, shape.length / 2]));
+      part.add(sphere(shape.radius, mat, [0, 0, -shape.length / 2]));
+    } else if (shape.type === "cylinder") {
+      const body = new THREE.Mesh(new THREE.CylinderGeometry(shape.radius, shape.radius, shape.length, 32), mat);
+      body.rotation.x = Math.PI / 2;
+      part.add(body);
+    } else if (shape.type === "sphere") {
+      part.add(sphere(shape.radius, mat));
+    } else if (shape.type === "box") {
+      part.add(new THREE.Mesh(new THREE.BoxGeometry(shape.size[0], shape.size[1], shape.size[2]), mat));
+    } else if (shape.type === "mesh") {
+      const geometry = new THREE.BufferGeometry();
+      geometry.setAttribute("position", new THREE.Float32BufferAttribute(shape.vertices.flat(), 3));
+      geometry.setIndex(shape.faces.flat());
+      geometry.computeVertexNormals();
+      part.add(new THREE.Mesh(geometry, mat));
     }
+    return part;
+  }
+
+  const solid = material(0xd9534f, { transparent: true, opacity: 0.6 });
+  const shell = new THREE.MeshBasicMaterial({ color: 0xd9534f, wireframe: true, transparent: true, opacity: 0.2 });
+  S.obstacles.forEach((o) => {
+    o.parts.forEach((shape) => scene.add(shapePart(shape, solid)));
+    o.shell.forEach((shape) => scene.add(shapePart(shape, shell)));
   });
   if (S.start) scene.add(sphere(0.035, material(0x16a34a), S.start));
   if (S.goal) scene.add(sphere(0.035, material(0x222222), S.goal));
@@ -61,21 +89,9 @@
     group.matrixAutoUpdate = false;
     const mat = material(link.color);
     link.shapes.forEach((shape) => {
-      const part = new THREE.Group();
-      part.matrixAutoUpdate = false;
-      part.matrix.fromArray(shape.origin);
-      if (shape.type === "capsule") {
-        const body = new THREE.Mesh(new THREE.CylinderGeometry(shape.radius, shape.radius, shape.length, 32), mat);
-        body.rotation.x = Math.PI / 2; // three's cylinder runs along y, URDF's along z
-        part.add(body);
-        part.add(sphere(shape.radius, mat, [0, 0, shape.length / 2]));
-        part.add(sphere(shape.radius, mat, [0, 0, -shape.length / 2]));
-      } else if (shape.type === "sphere") {
-        part.add(sphere(1.02 * shape.radius, mat)); // 2 % larger than the capsule ends it meets: no z-fighting
-      } else if (shape.type === "box") {
-        part.add(new THREE.Mesh(new THREE.BoxGeometry(shape.size[0], shape.size[1], shape.size[2]), mat));
-      }
-      group.add(part);
+      // a port sphere 2 % larger than the capsule ends it meets: no z-fighting
+      const drawn = shape.type === "sphere" ? Object.assign({}, shape, { radius: 1.02 * shape.radius }) : shape;
+      group.add(shapePart(drawn, mat));
     });
     scene.add(group);
     return group;

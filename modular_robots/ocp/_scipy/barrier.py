@@ -84,7 +84,9 @@ class BarrierJacobian:
             self._places = None
 
     def _put(self, J_eq, J_ineq, s):
-        slack, eq, ineq, indices, indptr, shape = self._places
+        places = self._places
+        assert places is not None  # _put follows a learnt structure
+        slack, eq, ineq, indices, indptr, shape = places
         data = np.empty(indices.size)
         data[eq] = J_eq.data
         data[ineq] = J_ineq.data

@@ -13,13 +13,17 @@ constraints' null space bends inactive torque rows by more than one correction r
 step was refused and the trust radius cut to a tenth, and a solve crawled
 (``docs/design-notes.md``). With ``max_corrections=1`` the loop is SciPy's, iterate for iterate
 (``tests/test_sqp.py``). The optimality's ``A^T v`` is taken by SciPy's kernel without building
-``A^T`` (:func:`~modular_robots.ocp.products.rmatvec`, bit for bit the same).
+``A^T`` (:func:`~modular_robots.ocp._scipy.products.rmatvec`, bit for bit the same).
 
 The projections are looked up in SciPy's module at each call, so
-:mod:`~modular_robots.ocp.trust_constr`'s replacement applies here as it does in SciPy's loop.
+:mod:`~modular_robots.ocp._scipy.trust_constr`'s replacement applies here as it does in SciPy's
+loop. Its installer puts this loop in place only where SciPy's loop is the one copied here (the
+same source, as in SciPy 1.16.0 to 1.17.1); elsewhere SciPy's own loop runs.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 from numpy.linalg import norm
@@ -116,7 +120,7 @@ def equality_constrained_sqp(
 
         quadratic_model = 1 / 2 * (H.dot(d)).dot(d) + c.T.dot(d)
         linearized_constr = A.dot(d) + b
-        vpred = max(1e-16, norm(b) - norm(linearized_constr))
+        vpred: Any = max(1e-16, norm(b) - norm(linearized_constr))  # a float, NumPy's stubs aside
         previous_penalty = penalty
         if quadratic_model > 0:
             penalty = max(penalty, quadratic_model / ((1 - PENALTY_FACTOR) * vpred))

@@ -1,6 +1,12 @@
-"""The IPOPT peer of the benchmark solves the project's own NLP: its symbolic dynamics equal
-Pinocchio's RNEA, and its constraint vector equals the project's, row for row (issue: the peer is
-only a fair comparison if it is the same problem)."""
+"""The IPOPT peer of the benchmark (:mod:`benchmarks.casadi_peer`) solves the project's own NLP:
+its symbolic dynamics equal Pinocchio's RNEA, and its constraint vector equals the project's, row
+for row (issue: the peer is only a fair comparison if it is the same problem). The peer's exact
+symbolic Hessian also checks the solver's second derivatives of RNEA.
+
+Beside the code it checks, as it tests benchmark code, not the package alone; ``make test`` runs
+it (``pytest tests benchmarks``)."""
+
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -8,13 +14,14 @@ import pytest
 
 casadi = pytest.importorskip("casadi", reason="the peer needs the bench extra (make test installs it)")
 
-from benchmarks.casadi_peer import PeerNLP, SymbolicRobot  # noqa: E402
 from modular_robots import Composition, load_scenario  # noqa: E402
 from modular_robots.feasibility import check_composition  # noqa: E402
 from modular_robots.ocp.candidate import composition_problem  # noqa: E402
 from modular_robots.robot import RobotModel, robot_model  # noqa: E402
 
-from .conftest import PAPER_5KG  # noqa: E402
+from .casadi_peer import PeerNLP, SymbolicRobot  # noqa: E402
+
+PAPER_5KG = Path(__file__).resolve().parents[1] / "scenarios" / "paper-5kg.yaml"
 
 # revolute joints about x and z, prismatic along z, a clear pair through the obstacles
 COMPOSITIONS = ("B-J1-L1-J2-L3-J1-L3-J1-L1-E2", "B-J1-L2-J1-L1-J1-L2-J2-L1-E2")

@@ -15,6 +15,8 @@ rounds identically), so the values and Jacobians are bit-identical to SciPy's;
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy import sparse
 from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
@@ -38,7 +40,7 @@ def canonical_rows(lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, np.ndarr
     none = np.empty(0, dtype=int)
     lb_inf, ub_inf = lb == -np.inf, ub == np.inf
     if np.all(lb_inf) and np.all(ub_inf):
-        groups = []
+        groups: list[tuple[np.ndarray, float, np.ndarray]] = []
         eq = none
     elif np.all(lb == ub):
         groups, eq = [], rows
@@ -81,7 +83,7 @@ class _Gather:
         self.eq_value = np.concatenate(lower)
         self.ineq_sign = np.concatenate(sign)
         self.ineq_signed_bound = self.ineq_sign * np.concatenate(bound)
-        self._structure = None
+        self._structure: tuple | None = None
 
     def fun(self, x):
         f = np.concatenate([cfun.fun(x) for cfun in self.functions])
@@ -109,10 +111,10 @@ class _Gather:
         )
 
     def _layout(self, jacobians):
-        indptr = [0]
+        starts = [0]
         for J in jacobians:  # the stacked rows' extents in the stacked data
-            indptr.extend((J.indptr[1:] + indptr[-1]).tolist())
-        indptr = np.asarray(indptr)
+            starts.extend((J.indptr[1:] + starts[-1]).tolist())
+        indptr = np.asarray(starts)
         indices = np.concatenate([J.indices for J in jacobians])
 
         def pick(rows):
@@ -163,7 +165,7 @@ class GatheredCanonical(CanonicalConstraint):
     @classmethod
     def concatenate(cls, canonical_constraints, sparse_jacobian):
         canonical = super().concatenate(canonical_constraints, sparse_jacobian)
-        sources = [getattr(c, "source", None) for c in canonical_constraints]
+        sources: list[Any] = [getattr(c, "source", None) for c in canonical_constraints]
         if not sparse_jacobian or not sources or not all(_gatherable(s) for s in sources):
             return canonical
         gather = _Gather(sources, sources[0][0].n)

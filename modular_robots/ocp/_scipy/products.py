@@ -6,7 +6,10 @@ constructor with its own checks, about 30 us more). For a CSR or CSC matrix of f
 and a float64 vector these products call the same compiled kernel on the same arrays: a CSR
 matrix's transpose is a CSC matrix with its very arrays, so ``csc_matvec`` on them is what
 SciPy's ``matrix.T @ x`` computes. The results are SciPy's bit for bit; anything else (another
-format or dtype, a vector of the wrong shape) goes to SciPy's product, with its checks.
+format or dtype, a vector of the wrong shape) goes to SciPy's product, with its checks. The
+kernels are a private SciPy module: without them every product is SciPy's, and the installer
+(:func:`~modular_robots.ocp._scipy.trust_constr.install`) checks them on a probe matrix first,
+setting them aside with a warning if they are missing or compute otherwise.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ class MatVec:
 
     def __init__(self, matrix, transpose: bool = False):
         self.matrix, self.transpose = matrix, transpose
-        layout = getattr(matrix, "format", None)
+        layout: str = getattr(matrix, "format", "")
         fast = _sparsetools is not None and layout in _TRANSPOSED and matrix.dtype == np.float64
         kernel_format = _TRANSPOSED.get(layout) if transpose else layout
         self.kernel = getattr(_sparsetools, f"{kernel_format}_matvec", None) if fast else None

@@ -22,7 +22,7 @@ from scipy.optimize._trustregion_constr import qp_subproblem as _qp
 
 __all__ = ["box_intersections"]
 
-#: SciPy's own, also once :mod:`~modular_robots.ocp.trust_constr` has put its replacement in its place.
+#: SciPy's own, also once :mod:`~modular_robots.ocp._scipy.trust_constr` has put its replacement in its place.
 scipy_box_intersections = getattr(_qp.box_intersections, "__scipy_original__", _qp.box_intersections)
 
 

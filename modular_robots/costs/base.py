@@ -1,0 +1,83 @@
+"""The cost protocol: what a task minimises, for step C's solver and step D's pruning.
+
+A cost is one file in this package (a class implementing :class:`Cost`) and one line in
+:data:`~modular_robots.costs.COSTS`; the scenario's ``task.cost`` names it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+from scipy import sparse
+
+__all__ = ["Cost", "Problem", "Motion", "Bounds", "Evaluated"]
+
+#: The scaled cost and, when asked, its gradient with respect to the scaled variables.
+Evaluated = tuple[float, np.ndarray | None]
+
+
+class Problem(Protocol):
+    """What a cost reads of the shooting problem (:class:`~modular_robots.ocp.ShootingProblem`).
+
+    Variables are scaled: the first is ``tf / tf_guess``; a cost's value is in units of
+    ``tf_guess`` seconds (its value in SI is the scaled value times ``tf_guess``).
+    """
+
+    intervals: int
+    substeps: int
+    n_variables: int
+    tf_guess: float
+    variable_scale: np.ndarray
+    tau_scale: np.ndarray
+
+    @property
+    def interval_columns(self) -> np.ndarray:
+        """``(N, p)``: the scaled variable of each of interval ``m``'s parameters ``(s_m, u_m,
+        tf)``, -1 where the parameter is fixed (the start state)."""
+        ...
+
+
+class Motion(Protocol):
+    """The propagated motion: torques ``(N, S + 1, nv)`` [N m | N] at the sub-step points of each
+    interval and, when derivatives are asked, their sensitivities ``(N, S + 1, nv, p)`` to the
+    interval's parameters."""
+
+    @property
+    def torques(self) -> np.ndarray: ...
+
+    @property
+    def torque_sens(self) -> np.ndarray | None: ...
+
+
+class Bounds(Protocol):
+    """What a cost's lower bound reads of the robot (:class:`~modular_robots.robot.RobotModel`)."""
+
+    def travel_time_bound(self, q_a: np.ndarray, q_b: np.ndarray, velocity: np.ndarray | None = None) -> float: ...
+
+
+@runtime_checkable
+class Cost(Protocol):
+    """A cost of a point-to-point motion, at rest at both ends."""
+
+    #: The cost's name in a scenario's ``task.cost`` and in ``result.json``.
+    name: ClassVar[str]
+    #: The unit of its value in SI, for reports (``s``).
+    unit: ClassVar[str]
+
+    def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
+        """A valid lower bound [SI] on the optimal cost of the move from ``q_start`` to ``q_goal``
+        within the joint velocity bounds ``velocity_bound``, known before any solve: step D drops a
+        candidate whose bound exceeds a verified cost. 0 where no better bound is known."""
+        ...
+
+    def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
+        """The scaled cost of a motion of duration ``tf`` [s] and, if ``derivatives``, its gradient
+        ``(n_variables,)`` with respect to the scaled variables."""
+        ...
+
+    def hessian(self, problem: Problem) -> Callable[[np.ndarray], sparse.csr_matrix] | None:
+        """The exact Hessian of the scaled cost, as a function of the scaled variables, or None:
+        the solver then approximates it (SR1)."""
+        ...

@@ -1,0 +1,45 @@
+"""Minimum effort: the integral of the squared torques, each relative to its joint's limit."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from .base import Bounds, Evaluated, Motion, Problem
+
+__all__ = ["Effort"]
+
+
+class Effort:
+    """``integral of sum_i (tau_i / tau_max,i)^2 dt`` [s], by the trapezoid rule over every
+    interval's sub-steps. No bound is known before a solve (0): the ratio rule alone prunes. Its
+    Hessian is approximated (SR1)."""
+
+    name: ClassVar[str] = "effort"
+    unit: ClassVar[str] = "s"
+
+    def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
+        return 0.0
+
+    def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
+        N, S = problem.intervals, problem.substeps
+        weights = np.full(S + 1, 1.0 / (N * S))
+        weights[[0, -1]] *= 0.5  # trapezoid in normalised time; dt = tf * weight
+        ratio = motion.torques / problem.tau_scale
+        per_interval = np.einsum("j,mjk->m", weights, ratio**2)
+        cost = tf * per_interval.sum() / problem.tf_guess
+        if not derivatives:
+            return cost, None
+        assert motion.torque_sens is not None, "the motion was propagated without sensitivities"
+        grad = np.zeros(problem.n_variables)
+        local = 2.0 * tf * np.einsum("j,mjk,mjkp->mp", weights, ratio / problem.tau_scale, motion.torque_sens)
+        local[:, -1] += per_interval
+        cols = problem.interval_columns
+        mask = cols >= 0
+        np.add.at(grad, cols[mask], local[mask])
+        grad *= problem.variable_scale / problem.tf_guess
+        return cost, grad
+
+    def hessian(self, problem: Problem) -> None:
+        return None

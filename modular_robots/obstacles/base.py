@@ -1,0 +1,98 @@
+"""The obstacle protocol: what every shape around the robot provides to the pipeline.
+
+A shape is one file in this package (a frozen dataclass implementing :class:`Obstacle`) and one
+line in :data:`~modular_robots.obstacles.SHAPES`. Everything else (the scenario reader, step B's
+collision test, step C's clearance rows, verification, ``result.json`` and the page) goes through
+this protocol.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+
+import fcl
+import numpy as np
+
+if TYPE_CHECKING:
+    from .._yamlio import Fields
+
+__all__ = ["Obstacle", "Witness"]
+
+#: Signed distance [m] and the witness points on the robot and on the obstacle (base frame).
+Witness = tuple[float, np.ndarray, np.ndarray]
+
+
+@runtime_checkable
+class Obstacle(Protocol):
+    """A rigid shape fixed in the base frame that the robot must keep clear of (SI units).
+
+    Distances are signed: negative when the robot's primitive (a capsule: a segment swept by a
+    sphere; a sphere is a capsule of length 0) overlaps the shape.
+    """
+
+    #: The shape's key in a scenario's ``task.obstacles`` and in ``result.json`` (``sphere``).
+    kind: ClassVar[str]
+
+    @classmethod
+    def from_fields(cls, f: Fields) -> Obstacle:
+        """Read the shape's mapping (``task.obstacles[i].<kind>``), naming the key on bad input."""
+        ...
+
+    @classmethod
+    def from_json(cls, data: Any) -> Obstacle:
+        """The inverse of :meth:`to_json`'s inner mapping; ``ValueError`` naming what is wrong."""
+        ...
+
+    def to_json(self) -> dict[str, Any]:
+        """The shape's fields as the scenario writes them (the inner mapping)."""
+        ...
+
+    def describe(self) -> str:
+        """A short human-readable form for messages, e.g. ``centre [0.5, 0, 0.4], radius 0.1``."""
+        ...
+
+    def bounding_sphere(self) -> tuple[np.ndarray, float]:
+        """Centre [m] and radius [m] of a sphere holding the whole shape: culls far obstacles."""
+        ...
+
+    def contains(self, point: Sequence[float]) -> bool:
+        """True if ``point`` [m] is inside the shape or on its surface."""
+        ...
+
+    def collision_object(self) -> fcl.CollisionObject:
+        """FCL's object for the shape, placed in the base frame."""
+        ...
+
+    @classmethod
+    def capsule_bounds(
+        cls,
+        obstacles: Sequence[Obstacle],
+        axis: np.ndarray,
+        mid: np.ndarray,
+        half_length: np.ndarray,
+        radius: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds ``(K, P, O)`` [m] on the signed distance between capsules and
+        ``obstacles`` (all of this class): capsule axes ``axis`` and midpoints ``mid``
+        ``(K, P, 3)``, half lengths and radii ``(P,)``. Equal where a closed form is exact;
+        the collision model asks FCL only for the pairs the bounds do not decide."""
+        ...
+
+    def penetration(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness | None:
+        """Signed distance and witness points of an overlapping capsule, in closed form, or None
+        to keep FCL's answer (FCL's signed distance can abort near contact: see
+        :func:`~modular_robots.obstacles.sphere.capsule_sphere`)."""
+        ...
+
+    @classmethod
+    def normals(cls, obstacles: Sequence[Obstacle], on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
+        """Directions ``(K, O, 3)`` (not normalised) in which the signed distance grows when the
+        robot's witness point ``on_robot`` moves; witness points ``(K, O, 3)`` of ``obstacles``."""
+        ...
+
+    def page(self, grow: float = 0.0) -> list[dict[str, Any]]:
+        """How the page draws the shape grown by ``grow`` [m]: parts in the page's shape
+        vocabulary (``type`` sphere, capsule, box, cylinder or mesh, their sizes, and ``origin``,
+        a column-major 4x4 pose in the base frame)."""
+        ...
