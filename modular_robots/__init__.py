@@ -26,8 +26,10 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
         InfeasibleError,
         InputError,
         ModularRobotsError,
+        ProblemError,
         ResultsFolderError,
         ScenarioError,
+        SolverReuseError,
         Terminated,
     )
     from .execution import InProcessExecutor, ProcessEngine, ProcessExecutor, SerialEngine, make_engine, make_executor
@@ -98,6 +100,8 @@ __all__ = [
     "Grammar",
     "InProcessExecutor",
     "InfeasibleError",
+    "ProblemError",
+    "SolverReuseError",
     "InputError",
     "Iterate",
     "JointLimits",
@@ -179,6 +183,8 @@ _PUBLIC = {
     "Grammar": "catalog",
     "InProcessExecutor": "execution",
     "InfeasibleError": "exceptions",
+    "ProblemError": "exceptions",
+    "SolverReuseError": "exceptions",
     "InputError": "exceptions",
     "Iterate": "ocp",
     "JointLimits": "catalog",

@@ -11,6 +11,7 @@ __all__ = [
     "ScenarioError",
     "CompositionError",
     "ProblemError",
+    "SolverReuseError",
     "InfeasibleError",
     "ResultsFolderError",
     "FolderBusyError",
@@ -48,6 +49,10 @@ class ProblemError(ModularRobotsError, ValueError):
     """Step C was asked for something it cannot do: a problem whose boundary configurations are
     outside the joint limits or in collision, an unknown cost, transcription or solver, a
     setting out of range. (Infeasible candidates are results, not errors.)"""
+
+
+class SolverReuseError(ModularRobotsError, RuntimeError):
+    """A step-C solver was asked to run a second time: each solves once."""
 
 
 class InfeasibleError(ModularRobotsError):

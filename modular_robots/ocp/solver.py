@@ -30,6 +30,7 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
 
+from ..exceptions import ProblemError, SolverReuseError
 from ._scipy import install, solver_thread
 from .shooting import ShootingProblem
 
@@ -136,9 +137,9 @@ class ShootingSolver:
         hessian: str = "sr1",
     ):
         if jacobian not in ("exact", "finite-difference"):
-            raise ValueError(f"jacobian must be 'exact' or 'finite-difference', got {jacobian!r}")
+            raise ProblemError(f"jacobian must be 'exact' or 'finite-difference', got {jacobian!r}")
         if hessian not in HESSIANS:
-            raise ValueError(f"hessian must be one of {list(HESSIANS)}, got {hessian!r}")
+            raise ProblemError(f"hessian must be one of {list(HESSIANS)}, got {hessian!r}")
         self.hessian = hessian
         s = problem.settings
         self.problem = problem
@@ -166,7 +167,7 @@ class ShootingSolver:
         if self._thread is None and self.outcome is not None:  # closed before it started
             return
         if self._started:
-            raise RuntimeError("a ShootingSolver iterates once; create a new one to solve again")
+            raise SolverReuseError("a ShootingSolver iterates once; create a new one to solve again")
         self._started = True
         self._thread = threading.Thread(target=self._run, name="trust-constr", daemon=True)
         self._thread.start()
@@ -206,7 +207,7 @@ class ShootingSolver:
         if self._thread is None and self.outcome is not None:
             return self.outcome
         if self._started:
-            raise RuntimeError("a ShootingSolver iterates once; create a new one to solve again")
+            raise SolverReuseError("a ShootingSolver iterates once; create a new one to solve again")
         self._started = self._direct = True
         try:
             self._run()
