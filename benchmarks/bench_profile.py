@@ -2,8 +2,8 @@
 end (the fastest of :data:`RUNS` solves), its own time grouped by who does the work
 (trust-constr's projections, FCL, the project's evaluation, the rest of SciPy/NumPy; SuperLU
 where a commit before a293e21 is profiled). The project's replacements of parts of
-trust-constr's own loop (``ocp.sqp``, ``ocp.trust_constr`` and the bit-identical ones it
-installs, but the projections and their sparse products) count with trust-constr. Pinocchio's
+trust-constr's own loop (``ocp._scipy.sqp``, ``ocp._scipy.trust_constr`` and the bit-identical
+ones it installs, but the projections and their sparse products) count with trust-constr. Pinocchio's
 functions are not Python functions that cProfile sees: their time counts in the project's
 evaluation that calls them. The full profile is written beside the JSON as ``profile.prof`` (not
 committed; open it with ``python -m pstats`` or snakeviz for a flame view).
@@ -45,7 +45,7 @@ def _group(key: tuple[str, int, str]) -> str:
     if "'solve' of 'SuperLU'" in name:
         return "SuperLU solves"
     if module in ("projections.py", "products.py") or filename.endswith("linalg/_decomp_lu.py"):
-        return "projections from the barrier structure (modular_robots.ocp.projections, LAPACK)"
+        return "projections from the barrier structure (modular_robots.ocp._scipy.projections, LAPACK)"
     if "fcl" in name or "fcl" in filename or filename.endswith("modular_robots/collision.py"):
         return "FCL and clearance"
     if "modular_robots" in filename:

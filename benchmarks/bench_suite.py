@@ -25,6 +25,7 @@ import numpy as np
 from modular_robots import InfeasibleError, load_scenario
 from modular_robots.ocp.candidate import CandidateResult, CandidateStatus
 from modular_robots.pipeline import run_scenario, with_pruning
+from modular_robots.plan.document import candidate_json
 
 from ._common import RESULTS, table, write
 from .suite import SUITE
@@ -37,7 +38,7 @@ SAME = 1e-6
 
 def _store(name: str, run) -> None:
     HISTORIES.mkdir(parents=True, exist_ok=True)
-    rows = [r.to_json() for r in run.candidates]
+    rows = [candidate_json(r) for r in run.candidates]
     document = {
         "candidates": rows,
         "winner": run.winner.name,

@@ -19,6 +19,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
     from .catalog import Catalog, Grammar, JointLimits, Module, load_catalog
     from .collision import Approach, CollisionModel, Distances, closest_approach
     from .composition import Composition, count_compositions, enumerate_compositions
+    from .costs import Cost
     from .exceptions import (
         CatalogError,
         CompositionError,
@@ -43,6 +44,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
     )
     from .folder import ResultsFolder
     from .modules import GeneralModule
+    from .obstacles import Obstacle, SphereObstacle
     from .ocp import (
         Candidate,
         CandidateSpec,
@@ -55,6 +57,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
         sample_trajectory,
         verify,
     )
+    from .ocp.solvers import Solver
     from .pipeline import RunResult, candidate_specs, optimize_composition, run_scenario
     from .plan import (
         BoundaryPair,
@@ -70,7 +73,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
     from .recorder import RunRecorder
     from .report import export_controller_rate, read_winner
     from .robot import Primitive, RobotModel, robot_model
-    from .scenario import OptimizerSettings, PruningSettings, Scenario, SphereObstacle, Task, load_scenario
+    from .scenario import OptimizerSettings, PruningSettings, Scenario, Task, load_scenario
     from .timor import import_timor
     from .urdf import composition_urdf, write_urdf
     from .viewer import write_viewer
@@ -124,7 +127,10 @@ __all__ = [
     "ShootingProblem",
     "ShootingSolver",
     "SolverOutcome",
+    "Obstacle",
     "SphereObstacle",
+    "Cost",
+    "Solver",
     "Task",
     "Tracking",
     "Trajectory",
@@ -207,7 +213,10 @@ _PUBLIC = {
     "ShootingProblem": "ocp",
     "ShootingSolver": "ocp",
     "SolverOutcome": "ocp",
-    "SphereObstacle": "scenario",
+    "Obstacle": "obstacles",
+    "SphereObstacle": "obstacles",
+    "Cost": "costs",
+    "Solver": "ocp.solvers",
     "Task": "scenario",
     "Tracking": "plan",
     "Trajectory": "plan",

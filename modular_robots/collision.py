@@ -11,6 +11,7 @@ import itertools
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import fcl
 import numpy as np
@@ -100,13 +101,11 @@ class CollisionModel:
                 if joint > 0:
                     start = model.joints[joint].idx_v
                     self._supports[i, start : start + model.joints[joint].nv] = True
-        #: The obstacles by shape: each class's batch methods take its own, by these indices.
-        self._groups: list[tuple[type[Obstacle], list[int]]] = []
-        for j, o in enumerate(self.obstacles):
-            group = next((g for g in self._groups if g[0] is type(o)), None)
-            if group is None:
-                self._groups.append(group := (type(o), []))
-            group[1].append(j)
+        #: The obstacles by shape: each class, the indices of its obstacles and their batch.
+        self._groups: list[tuple[type[Obstacle], list[int], Any]] = []
+        for cls in dict.fromkeys(type(o) for o in self.obstacles):
+            index = [j for j, o in enumerate(self.obstacles) if type(o) is cls]
+            self._groups.append((cls, index, cls.batch([self.obstacles[j] for j in index])))
         self._obstacle_objects = [_shared_object(("obstacle", o), _obstacle_object, o) for o in self.obstacles]
 
     def distances(self, q: np.ndarray) -> Distances:
@@ -199,11 +198,10 @@ class CollisionModel:
         pair, ``(K, P, O)``, from each shape's :meth:`~modular_robots.obstacles.Obstacle.capsule_bounds`."""
         shape = mid.shape[:2] + (len(self.obstacles),)
         if len(self._groups) == 1:  # one shape: its batch is every obstacle, in order
-            cls, _ = self._groups[0]
-            return cls.capsule_bounds(self.obstacles, rot[..., 2], mid, 0.5 * self._prim_lengths, self._prim_radii)
+            cls, _, batch = self._groups[0]
+            return cls.capsule_bounds(batch, rot[..., 2], mid, 0.5 * self._prim_lengths, self._prim_radii)
         lower, upper = np.empty(shape), np.empty(shape)
-        for cls, index in self._groups:
-            batch = [self.obstacles[j] for j in index]
+        for cls, index, batch in self._groups:
             low, up = cls.capsule_bounds(batch, rot[..., 2], mid, 0.5 * self._prim_lengths, self._prim_radii)
             lower[..., index], upper[..., index] = low, up
         return lower, upper
@@ -212,10 +210,10 @@ class CollisionModel:
         """Each shape's :meth:`~modular_robots.obstacles.Obstacle.normals` at the witness points
         ``(K, O, 3)``."""
         if len(self._groups) == 1:
-            return self._groups[0][0].normals(self.obstacles, on_robot, on_obstacle)
+            cls, _, batch = self._groups[0]
+            return cls.normals(batch, on_robot, on_obstacle)
         normal = np.empty_like(on_obstacle)
-        for cls, index in self._groups:
-            batch = [self.obstacles[j] for j in index]
+        for cls, index, batch in self._groups:
             normal[:, index] = cls.normals(batch, on_robot[:, index], on_obstacle[:, index])
         return normal
 
@@ -292,9 +290,6 @@ class Approach:
     t: float
     primitive: str
     obstacle: int
-
-    def to_json(self) -> dict:
-        return {"clearance": self.clearance, "t": self.t, "primitive": self.primitive, "obstacle": self.obstacle}
 
 
 def closest_approach(collision: CollisionModel, times: np.ndarray, qs: np.ndarray) -> Approach | None:

@@ -105,10 +105,13 @@ def cost_bound(scenario: Scenario, spec: CandidateSpec) -> float:
     """The lower bound on ``spec``'s optimal cost before it is optimised, the one its problem will
     have (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`): the task's cost's
     :meth:`~modular_robots.costs.Cost.lower_bound` at the plan's velocity bounds."""
+    cost = COSTS[scenario.task.cost]
+    if not cost.bounded:
+        return 0.0
     robot = robot_model(spec.composition, scenario.catalog, scenario.task.payload)
     velocity_bound = scenario.optimizer.velocity_margin * robot.velocity_limit
     q_start, q_goal = np.asarray(spec.q_start, dtype=float), np.asarray(spec.q_goal, dtype=float)
-    return COSTS[scenario.task.cost].lower_bound(robot, q_start, q_goal, velocity_bound)
+    return cost.lower_bound(robot, q_start, q_goal, velocity_bound)
 
 
 def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:

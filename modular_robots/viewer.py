@@ -117,7 +117,6 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
             }
             for o in task.obstacles
         ],
-        "margin": task.clearance_margin,
         "start": list(task.start) if task.start is not None else None,
         "goal": list(task.goal) if task.goal is not None else None,
     }

@@ -7,10 +7,12 @@ A cost is one file in this package (a class implementing :class:`Cost`) and one 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
-from scipy import sparse
+
+if TYPE_CHECKING:
+    from scipy import sparse
 
 __all__ = ["Cost", "Problem", "Motion", "Bounds", "Evaluated"]
 
@@ -63,8 +65,9 @@ class Cost(Protocol):
 
     #: The cost's name in a scenario's ``task.cost`` and in ``result.json``.
     name: ClassVar[str]
-    #: The unit of its value in SI, for reports (``s``).
-    unit: ClassVar[str]
+    #: False when :meth:`lower_bound` is 0 for every move: step D then needs no robot model to
+    #: bound a candidate before its solve.
+    bounded: ClassVar[bool]
 
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
         """A valid lower bound [SI] on the optimal cost of the move from ``q_start`` to ``q_goal``

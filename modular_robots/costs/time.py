@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
-from scipy import sparse
 
 from .base import Bounds, Evaluated, Motion, Problem
+
+if TYPE_CHECKING:
+    from scipy import sparse
 
 __all__ = ["Time"]
 
@@ -19,7 +21,7 @@ class Time:
     (:meth:`~modular_robots.robot.RobotModel.travel_time_bound`)."""
 
     name: ClassVar[str] = "time"
-    unit: ClassVar[str] = "s"
+    bounded: ClassVar[bool] = True
 
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
         return robot.travel_time_bound(q_start, q_goal, velocity_bound)
@@ -33,5 +35,7 @@ class Time:
 
     def hessian(self, problem: Problem) -> Callable[[np.ndarray], sparse.csr_matrix]:
         """Zero: the scaled cost is the first variable."""
+        from scipy import sparse  # at solve time: the scenario reader imports this module
+
         zero = sparse.csr_matrix((problem.n_variables, problem.n_variables))
         return lambda y: zero

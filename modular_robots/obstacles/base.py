@@ -11,10 +11,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
-import fcl
 import numpy as np
 
 if TYPE_CHECKING:
+    import fcl
+
     from .._yamlio import Fields
 
 __all__ = ["Obstacle", "Witness"]
@@ -28,7 +29,10 @@ class Obstacle(Protocol):
     """A rigid shape fixed in the base frame that the robot must keep clear of (SI units).
 
     Distances are signed: negative when the robot's primitive (a capsule: a segment swept by a
-    sphere; a sphere is a capsule of length 0) overlaps the shape.
+    sphere; a sphere is a capsule of length 0) overlaps the shape. An obstacle is a value:
+    hashable, equal to another of the same fields, with a repr that depends only on them (the
+    collision model shares FCL objects by obstacle; step B's verdicts are keyed by the task's
+    repr), so its fields are tuples and numbers, never arrays.
     """
 
     #: The shape's key in a scenario's ``task.obstacles`` and in ``result.json`` (``sphere``).
@@ -65,18 +69,25 @@ class Obstacle(Protocol):
         ...
 
     @classmethod
+    def batch(cls, obstacles: Sequence[Obstacle]) -> Any:
+        """What the batch methods below need of ``obstacles`` (all of this class), computed once
+        per collision model (arrays of centres and sizes): they run at every clearance query."""
+        ...
+
+    @classmethod
     def capsule_bounds(
         cls,
-        obstacles: Sequence[Obstacle],
+        batch: Any,
         axis: np.ndarray,
         mid: np.ndarray,
         half_length: np.ndarray,
         radius: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds ``(K, P, O)`` [m] on the signed distance between capsules and
-        ``obstacles`` (all of this class): capsule axes ``axis`` and midpoints ``mid``
+        the obstacles of ``batch`` (:meth:`batch`): capsule axes ``axis`` and midpoints ``mid``
         ``(K, P, 3)``, half lengths and radii ``(P,)``. Equal where a closed form is exact;
-        the collision model asks FCL only for the pairs the bounds do not decide."""
+        the collision model asks FCL only for the pairs the bounds do not decide (an upper bound
+        may be ``inf``)."""
         ...
 
     def penetration(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness | None:
@@ -86,9 +97,11 @@ class Obstacle(Protocol):
         ...
 
     @classmethod
-    def normals(cls, obstacles: Sequence[Obstacle], on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
+    def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
         """Directions ``(K, O, 3)`` (not normalised) in which the signed distance grows when the
-        robot's witness point ``on_robot`` moves; witness points ``(K, O, 3)`` of ``obstacles``."""
+        robot's witness point ``on_robot`` moves; witness points ``(K, O, 3)`` of the obstacles
+        of ``batch``. Right inside the shape too: where :meth:`penetration` returns None, the
+        witness points are FCL's, and ``on_robot - on_obstacle`` points the wrong way there."""
         ...
 
     def page(self, grow: float = 0.0) -> list[dict[str, Any]]:

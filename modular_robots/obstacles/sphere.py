@@ -5,18 +5,22 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
-import fcl
 import numpy as np
 
 from ._json import json_number, json_vector
 from .base import Obstacle, Witness
 
 if TYPE_CHECKING:
+    import fcl
+
     from .._yamlio import Fields
 
 __all__ = ["SphereObstacle", "capsule_sphere"]
+
+#: A batch of spheres: centres ``(O, 3)`` and radii ``(O,)`` [m].
+SphereBatch = tuple[np.ndarray, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -62,12 +66,23 @@ class SphereObstacle:
         return math.dist(self.center, point) <= self.radius
 
     def collision_object(self) -> fcl.CollisionObject:
+        import fcl  # at model time: the scenario reader imports this module
+
         return fcl.CollisionObject(fcl.Sphere(self.radius), fcl.Transform(np.asarray(self.center, dtype=float)))
+
+    @classmethod
+    def batch(cls, obstacles: Sequence[Obstacle]) -> SphereBatch:
+        """The centres ``(O, 3)`` and radii ``(O,)`` [m] of ``obstacles`` (spheres only)."""
+        if not all(isinstance(o, SphereObstacle) for o in obstacles):
+            raise TypeError("a batch of SphereObstacle holds spheres only")
+        spheres = cast("Sequence[SphereObstacle]", obstacles)
+        centers = np.array([o.center for o in spheres], dtype=float).reshape(-1, 3)
+        return centers, np.array([o.radius for o in spheres], dtype=float)
 
     @classmethod
     def capsule_bounds(
         cls,
-        obstacles: Sequence[Obstacle],
+        batch: Any,
         axis: np.ndarray,
         mid: np.ndarray,
         half_length: np.ndarray,
@@ -75,9 +90,7 @@ class SphereObstacle:
     ) -> tuple[np.ndarray, np.ndarray]:
         """The distance from each centre to each capsule's axis segment, less both radii: exact
         (to rounding), so both bounds are that distance."""
-        spheres = _spheres(obstacles)
-        centers = np.array([o.center for o in spheres], dtype=float).reshape(-1, 3)
-        radii = np.array([o.radius for o in spheres], dtype=float)
+        centers, radii = batch
         offset = centers[None, None] - mid[:, :, None]  # (K, P, O, 3)
         half = half_length[None, :, None]
         along = np.clip(np.einsum("kpoc,kpc->kpo", offset, axis), -half, half)
@@ -89,21 +102,15 @@ class SphereObstacle:
         return capsule_sphere(mid, axis, length, radius, np.asarray(self.center, dtype=float), self.radius)
 
     @classmethod
-    def normals(cls, obstacles: Sequence[Obstacle], on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
+    def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
         """From the centre to the obstacle's witness point: right whether the robot is outside
         or inside the sphere."""
-        return on_obstacle - np.array([o.center for o in _spheres(obstacles)], dtype=float).reshape(-1, 3)
+        return on_obstacle - batch[0]
 
     def page(self, grow: float = 0.0) -> list[dict[str, Any]]:
         origin = np.eye(4)
         origin[:3, 3] = self.center
         return [{"type": "sphere", "radius": self.radius + grow, "origin": origin.T.ravel().tolist()}]
-
-
-def _spheres(obstacles: Sequence[Obstacle]) -> list[SphereObstacle]:
-    if not all(isinstance(o, SphereObstacle) for o in obstacles):
-        raise TypeError("SphereObstacle's batch methods take spheres only")
-    return list(obstacles)  # type: ignore[arg-type]
 
 
 def capsule_sphere(

@@ -26,19 +26,28 @@ __all__ = ["Solver", "SolverFactory", "SOLVERS", "make_solver", "UnknownSolverEr
 class Solver(Protocol):
     """One solve of one problem, one iteration at a time: the contract step D relies on.
 
-    - :meth:`iterate` is called at most once. It yields one :class:`~.solver.Iterate` per
-      iteration, numbered from the ``iteration_offset`` the solver was made with; the caller may
-      stop pulling at any yield and call :meth:`close`. Nothing runs between two pulls that the
-      caller did not ask for (the solver is suspended, holding no lock the caller needs).
-    - When :meth:`iterate` returns, :attr:`outcome` is set: ``optimal``, ``failed`` (with a
-      reason) or ``stopped``; its ``final`` is the last iterate (None if there was none).
+    - A solver runs once, by :meth:`iterate` or by :meth:`solve`. :meth:`iterate` yields one
+      :class:`~.solver.Iterate` per iteration, numbered from the ``iteration_offset`` the solver
+      was made with; the caller may stop pulling at any yield and call :meth:`close`. Nothing
+      runs between two pulls that the caller did not ask for (the solver is suspended, holding
+      no lock the caller needs). :meth:`solve` runs to the end without yielding (the same
+      iterates) and returns the outcome; a second run raises
+      :class:`~modular_robots.exceptions.SolverReuseError` (``iterate`` after ``solve`` yields
+      nothing).
+    - When :meth:`iterate` returns, :attr:`outcome` is set; :meth:`solve` returns it.
     - :meth:`close` is idempotent, may be called before, during or after :meth:`iterate`, frees
       what the solve holds (threads) and leaves :attr:`outcome` set (``stopped`` if the solve had
-      not ended).
-    - :meth:`solve` runs to the end without yielding and returns the outcome (the same iterates).
+      not ended). Called during :meth:`solve` (from its callback or another thread), it makes
+      that solve stop at its next iteration and return a ``stopped`` outcome.
     - :attr:`last` is the last iterate handed out (None before the first).
     - Exceptions inside the algorithm end the solve as ``failed``; ``KeyboardInterrupt`` and
       ``SystemExit`` reach the caller after the solve is stopped.
+
+    What the candidate and step D read: every field of :class:`~.solver.Iterate` (``cost`` in SI
+    units of the problem's cost, ``constraint_violation`` in the scaled variables, ``tf``, ``y``,
+    ``cost_bound`` the problem's), and of :class:`~.solver.SolverOutcome` (``status``
+    ``optimal``, ``failed`` or ``stopped``; ``limit_reached`` when it stopped at the iteration
+    limit, which makes the candidate restart from ``final``; ``seconds`` inside the solver).
     """
 
     outcome: SolverOutcome | None
