@@ -21,6 +21,7 @@ import numpy as np
 from .catalog import Catalog
 from .composition import Composition
 from .modules import GeneralModule, Pose
+from .xml_text import xml_comment
 
 __all__ = ["assembly_urdf", "assembly_shapes", "assembly_reach", "matrix", "rpy_from_matrix", "body_link"]
 
@@ -105,7 +106,7 @@ def assembly_urdf(composition: Composition, catalog: Catalog, payload_part: str,
     joint_index = 0
     for index, module_id in enumerate(composition.modules):
         module = catalog.general_module(module_id)
-        parts.append(f"  <!-- module {index}: {module.id} ({module.kind}) -->\n")
+        parts.append(f"  <!-- {xml_comment(f'module {index}: {module.id} ({module.kind})')} -->\n")
         for body, joint in module.chain():
             link = body_link(index, module, body.id)
             if joint is None:
