@@ -229,7 +229,7 @@ class CollisionModel:
             if jac is not None:
                 pin.computeJointJacobians(model, data, q)
                 pin.updateFramePlacements(model, data)
-                jac[k] = data.J
+                jac[k] = data.J.reshape(6, -1)  # one joint: Pinocchio gives (6,), not (6, 1)
             else:
                 pin.framesForwardKinematics(model, data, q)
             # One copy of every frame's placement: data.oMf[fid] costs about 0.8 us a frame, the

@@ -213,7 +213,8 @@ def _frame_jacobians(frames: list[tuple[pin.Model, pin.Data, int]], q: np.ndarra
     ``(model, data, frame id)`` of each row of ``q`` ``(K, nq)``."""
     jacobians, positions = np.empty((len(q), 6, q.shape[1])), np.empty((len(q), 3))
     for row, ((model, data, frame), q_row) in enumerate(zip(frames, q)):
-        jacobians[row] = pin.computeFrameJacobian(model, data, q_row, frame, pin.LOCAL_WORLD_ALIGNED)
+        # Pinocchio returns a one-column matrix as a vector (6,): one joint gives (6,), not (6, 1).
+        jacobians[row] = pin.computeFrameJacobian(model, data, q_row, frame, pin.LOCAL_WORLD_ALIGNED).reshape(6, -1)
         positions[row] = data.oMf[frame].translation
     return jacobians, positions
 

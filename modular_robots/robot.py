@@ -172,13 +172,14 @@ class RobotModel:
 
     def tool_jacobian(self, q: np.ndarray) -> np.ndarray:
         """3 x nv Jacobian of :meth:`tool_position` (base-frame axes)."""
-        return pin.computeFrameJacobian(
+        jacobian = pin.computeFrameJacobian(
             self.model,
             self.data,
             np.asarray(q, dtype=float),
             self.tool_frame_id,
             pin.ReferenceFrame.LOCAL_WORLD_ALIGNED,
-        )[:3].copy()
+        )
+        return jacobian.reshape(6, -1)[:3].copy()  # one joint: Pinocchio gives (6,), not (6, 1)
 
     def primitive_axes(
         self, q: np.ndarray | None, indices: Sequence[int] | None = None
