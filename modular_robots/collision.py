@@ -126,13 +126,20 @@ class CollisionModel:
     def _pair_distance(self, i: int, j: int, mid: np.ndarray, rot: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """Signed distance and witness points of primitive ``i``, placed (its FCL object) with its
         axis midpoint at ``mid`` and the rotation ``rot`` (axis: its third column), and obstacle
-        ``j``: FCL's while they are apart, the obstacle's closed form
-        (:meth:`~modular_robots.obstacles.Obstacle.penetration`) when FCL reports an overlap."""
+        ``j``: the obstacle's closed form
+        (:meth:`~modular_robots.obstacles.Obstacle.signed_distance`) for a shape that has one
+        everywhere, else FCL's while they are apart and the closed form when FCL reports an
+        overlap."""
+        obstacle = self.obstacles[j]
+        if obstacle.closed_form:
+            exact = obstacle.signed_distance(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i])
+            assert exact is not None, f"{type(obstacle).__name__} is closed_form and must measure every pair"
+            return exact
         result = fcl.DistanceResult()
         d = fcl.distance(self._robot_objects[i], self._obstacle_objects[j], _NEAREST_POINTS, result)
         inside = None
         if d < 0.0:
-            inside = self.obstacles[j].penetration(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i])
+            inside = obstacle.signed_distance(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i])
         if inside is None:  # NumPy arrays, made anew on each read of the property
             on_robot, on_obstacle = result.nearest_points
             return d, on_robot, on_obstacle

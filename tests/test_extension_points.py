@@ -67,7 +67,8 @@ def test_a_registered_shape_is_read_from_a_scenario_and_round_trips_through_json
         assert obstacle_from_json(obstacle_to_json(o)) == o
     scenario_path.write_text(text.replace("- sphere:", "- cone:", 1))
     with pytest.raises(
-        ScenarioError, match=r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: ball, sphere\)"
+        ScenarioError,
+        match=r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: ball, capsule, plane, sphere\)",
     ):
         load_scenario(scenario_path)
 

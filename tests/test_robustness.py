@@ -398,7 +398,7 @@ def test_filter_checks_its_output_before_step_b(tmp_path):
         (
             "obstacles:\n    - sphere:",
             "obstacles:\n    - box:",
-            "task.obstacles[0].box: unknown key (expected one of: sphere)",
+            "task.obstacles[0].box: unknown key (expected one of: capsule, plane, sphere)",
         ),
     ],
 )

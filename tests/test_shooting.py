@@ -47,7 +47,17 @@ from modular_robots.pipeline import candidate_specs, optimize_composition
 from modular_robots.robot import RobotModel
 from modular_robots.scenario import OptimizerSettings, SphereObstacle, load_scenario
 
-from .helpers.models import ARM_GOAL, ARM_START, ARM_VEL, L_LINK, M_LINK, R_LINK, planar_arm, ur5
+from .helpers.models import (
+    ARM_GOAL,
+    ARM_START,
+    ARM_VEL,
+    L_LINK,
+    M_LINK,
+    arm_clearance,
+    arm_points,
+    planar_arm,
+    ur5,
+)
 from .helpers.paths import PAPER_5KG, ROOT
 
 # A revolute + prismatic composition (J2 in the middle) and a revolute-only one, both feasible
@@ -93,24 +103,6 @@ def arm_mass_coriolis(q, v):
     h = M_LINK * L_LINK * lc * s2
     c = np.array([-h * (2 * v[0] * v[1] + v[1] ** 2), h * v[0] ** 2])
     return np.array([[m11, m12], [m12, m22]]), c
-
-
-def arm_points(q):
-    """Base, elbow and tool positions of the planar arm (closed form)."""
-    elbow = L_LINK * np.array([math.cos(q[0]), math.sin(q[0]), 0.0])
-    tool = elbow + L_LINK * np.array([math.cos(q[0] + q[1]), math.sin(q[0] + q[1]), 0.0])
-    return np.zeros(3), elbow, tool
-
-
-def arm_clearance(q, obstacle: SphereObstacle) -> float:
-    """Closed-form signed distance between the arm's two capsules and a sphere (no FCL)."""
-    base, elbow, tool = arm_points(q)
-    c = np.asarray(obstacle.center, dtype=float)
-    out = np.inf
-    for a, b in ((base, elbow), (elbow, tool)):
-        t = np.clip(np.dot(c - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
-        out = min(out, float(np.linalg.norm(c - (a + t * (b - a)))) - R_LINK - obstacle.radius)
-    return out
 
 
 def replay_arm(problem: ShootingProblem, y: np.ndarray, points_per_interval: int = 200):

@@ -10,6 +10,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from .base import Obstacle, Witness
+from .capsule import CapsuleObstacle
+from .plane import PlaneObstacle
 from .sphere import SphereObstacle
 
 if TYPE_CHECKING:
@@ -19,6 +21,8 @@ __all__ = [
     "Obstacle",
     "Witness",
     "SphereObstacle",
+    "CapsuleObstacle",
+    "PlaneObstacle",
     "SHAPES",
     "obstacle_from_fields",
     "obstacle_from_json",
@@ -26,7 +30,7 @@ __all__ = [
 ]
 
 #: Every shape, by its key in a scenario's ``task.obstacles`` and in ``result.json``.
-SHAPES: dict[str, type[Obstacle]] = {cls.kind: cls for cls in (SphereObstacle,)}
+SHAPES: dict[str, type[Obstacle]] = {cls.kind: cls for cls in (SphereObstacle, CapsuleObstacle, PlaneObstacle)}
 
 
 def obstacle_from_fields(item: Fields) -> Obstacle:

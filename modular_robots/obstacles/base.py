@@ -37,6 +37,10 @@ class Obstacle(Protocol):
 
     #: The shape's key in a scenario's ``task.obstacles`` and in ``result.json`` (``sphere``).
     kind: ClassVar[str]
+    #: True: :meth:`signed_distance` gives every distance and FCL is never asked (FCL has no
+    #: distance for some shapes: a half-space crashes the process). False: FCL
+    #: measures apart pairs and :meth:`signed_distance` only overlapping ones.
+    closed_form: ClassVar[bool]
 
     @classmethod
     def from_fields(cls, f: Fields) -> Obstacle:
@@ -90,17 +94,18 @@ class Obstacle(Protocol):
         may be ``inf``)."""
         ...
 
-    def penetration(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness | None:
-        """Signed distance and witness points of an overlapping capsule, in closed form, or None
-        to keep FCL's answer (FCL's signed distance can abort near contact: see
-        :func:`~modular_robots.obstacles.sphere.capsule_sphere`)."""
+    def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness | None:
+        """Signed distance and witness points of a capsule (axis midpoint ``mid``, unit ``axis``,
+        ``length``, ``radius``) in closed form, or None to keep FCL's answer. Asked for every
+        pair of a :attr:`closed_form` shape, else only where FCL reports an overlap (FCL's signed
+        distance can abort near contact: see :func:`~modular_robots.obstacles.sphere.capsule_sphere`)."""
         ...
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
         """Directions ``(K, O, 3)`` (not normalised) in which the signed distance grows when the
         robot's witness point ``on_robot`` moves; witness points ``(K, O, 3)`` of the obstacles
-        of ``batch``. Right inside the shape too: where :meth:`penetration` returns None, the
+        of ``batch``. Right inside the shape too: where :meth:`signed_distance` returns None, the
         witness points are FCL's, and ``on_robot - on_obstacle`` points the wrong way there."""
         ...
 

@@ -30,6 +30,7 @@ class SphereObstacle:
     center: tuple[float, float, float]
     radius: float
     kind: ClassVar[str] = "sphere"
+    closed_form: ClassVar[bool] = False  # FCL's sphere distances are exact: its results are kept
 
     def __post_init__(self) -> None:  # any sequence of three numbers in, a hashable value out
         x, y, z = (float(c) for c in self.center)
@@ -98,7 +99,7 @@ class SphereObstacle:
         gap = apart - radius[None, :, None] - radii[None, None, :]
         return gap, gap
 
-    def penetration(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
+    def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
         return capsule_sphere(mid, axis, length, radius, np.asarray(self.center, dtype=float), self.radius)
 
     @classmethod

@@ -5,10 +5,12 @@ example-robot-data (a URDF the package did not generate) with a payload."""
 from __future__ import annotations
 
 import importlib.metadata
+import math
 
 import numpy as np
 import pinocchio as pin
 
+from modular_robots.obstacles import SphereObstacle
 from modular_robots.robot import Primitive, RobotModel
 
 # Planar two-link arm in the horizontal plane (joint axes along z, parallel to gravity, so
@@ -58,3 +60,21 @@ def ur5(payload: float) -> RobotModel:
     tool = model.frames[model.getFrameId("tool0")]
     model.appendBodyToJoint(tool.parentJoint, pin.Inertia.FromSphere(payload, 0.05), tool.placement)
     return RobotModel(model, "tool0", [Primitive("payload", "tool0", 0.05)], name="ur5")
+
+
+def arm_points(q):
+    """Base, elbow and tool positions of the planar arm (closed form)."""
+    elbow = L_LINK * np.array([math.cos(q[0]), math.sin(q[0]), 0.0])
+    tool = elbow + L_LINK * np.array([math.cos(q[0] + q[1]), math.sin(q[0] + q[1]), 0.0])
+    return np.zeros(3), elbow, tool
+
+
+def arm_clearance(q, obstacle: SphereObstacle) -> float:
+    """Closed-form signed distance between the arm's two capsules and a sphere (no FCL)."""
+    base, elbow, tool = arm_points(q)
+    c = np.asarray(obstacle.center, dtype=float)
+    out = np.inf
+    for a, b in ((base, elbow), (elbow, tool)):
+        t = np.clip(np.dot(c - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+        out = min(out, float(np.linalg.norm(c - (a + t * (b - a)))) - R_LINK - obstacle.radius)
+    return out

@@ -1,0 +1,54 @@
+"""Closed-form geometry the shapes share: rotations from roll-pitch-yaw and the closest points of
+two segments, vectorised over any leading axes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["rpy_matrix", "segment_parameters", "pose_columns"]
+
+
+def rpy_matrix(rpy: tuple[float, float, float]) -> np.ndarray:
+    """The rotation of fixed-axis roll, pitch, yaw [rad] (URDF's: ``Rz(yaw) Ry(pitch) Rx(roll)``)."""
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def pose_columns(rotation: np.ndarray, position: np.ndarray) -> list[float]:
+    """A 4x4 pose as 16 numbers in column-major order (three.js's, the page's)."""
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rotation, position
+    return pose.T.ravel().tolist()
+
+
+def segment_parameters(p1: np.ndarray, d1: np.ndarray, p2: np.ndarray, d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters ``s, t`` in [0, 1] of the closest points ``p1 + s d1`` and ``p2 + t d2`` of two
+    segments (each may be a point: a zero direction), by the clamped normal equations
+    (Ericson, Real-Time Collision Detection, 5.1.9); arrays ``(..., 3)`` broadcast together."""
+    r = p1 - p2
+    a = np.einsum("...c,...c->...", d1, d1)
+    e = np.einsum("...c,...c->...", d2, d2)
+    b = np.einsum("...c,...c->...", d1, d2)
+    c = np.einsum("...c,...c->...", d1, r)
+    f = np.einsum("...c,...c->...", d2, r)
+    a, e, b, c, f = np.broadcast_arrays(a, e, b, c, f)
+    tiny = 1e-300
+    denom = a * e - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(denom > 1e-12 * np.maximum(a * e, tiny), np.clip((b * f - c * e) / denom, 0.0, 1.0), 0.0)
+        t = np.where(e > tiny, (b * s + f) / e, 0.0)
+        below, above = t < 0.0, t > 1.0
+        t = np.clip(t, 0.0, 1.0)
+        s = np.where(below, np.clip(-c / np.where(a > tiny, a, 1.0), 0.0, 1.0), s)
+        s = np.where(above, np.clip((b - c) / np.where(a > tiny, a, 1.0), 0.0, 1.0), s)
+    s = np.where(a > tiny, s, 0.0)
+    return s, t
