@@ -17,7 +17,7 @@ import fcl
 import numpy as np
 import pinocchio as pin
 
-from .obstacles import Obstacle
+from .obstacles import Obstacle, Witness
 from .robot import RobotModel
 
 __all__ = [
@@ -120,10 +120,10 @@ class CollisionModel:
         on_obstacle = np.empty(shape + (3,))
         for i in range(len(self._robot_objects)):
             for j in range(len(self._obstacle_objects)):
-                dist[i, j], on_robot[i, j], on_obstacle[i, j] = self._pair_distance(i, j, mid[i], rot[i])
+                dist[i, j], on_robot[i, j], on_obstacle[i, j], _ = self._pair_distance(i, j, mid[i], rot[i])
         return Distances(dist, on_robot, on_obstacle)
 
-    def _pair_distance(self, i: int, j: int, mid: np.ndarray, rot: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def _pair_distance(self, i: int, j: int, mid: np.ndarray, rot: np.ndarray) -> Witness:
         """Signed distance and witness points of primitive ``i``, placed (its FCL object) with its
         axis midpoint at ``mid`` and the rotation ``rot`` (axis: its third column), and obstacle
         ``j``: the obstacle's closed form
@@ -142,7 +142,7 @@ class CollisionModel:
             inside = obstacle.signed_distance(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i])
         if inside is None:  # NumPy arrays, made anew on each read of the property
             on_robot, on_obstacle = result.nearest_points
-            return d, on_robot, on_obstacle
+            return d, on_robot, on_obstacle, None
         return inside
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
@@ -184,17 +184,28 @@ class CollisionModel:
                 _place(self._robot_objects[i], rot[k, i], mid[k, i])
                 placed = (k, i)
             found.append(self._pair_distance(i, j, mid[k, i], rot[k, i]))
+        given = np.full(measure.shape + (3,), np.nan)  # gradients the shapes give with their distances
         if found:
-            d, pr, po = zip(*found)
+            d, pr, po, gradients = zip(*found)
             dist[ks, iis, js], on_robot[ks, iis, js], on_obstacle[ks, iis, js] = d, pr, po
+            for index, g in enumerate(gradients):
+                if g is not None:
+                    given[ks[index], iis[index], js[index]] = g
         best = dist.argmin(axis=1)  # (K, O)
         rows = np.arange(len(qs))[:, None]
         closest = dist[rows, best, np.arange(n_obstacles)]
         if not derivatives:
             return closest, None
         p = on_robot[rows, best, np.arange(n_obstacles)]  # (K, O, 3)
-        normal = self._normals(p, on_obstacle[rows, best, np.arange(n_obstacles)])
-        normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+        given_best = given[rows, best, np.arange(n_obstacles)]
+        has = ~np.isnan(given_best[..., 0])
+        if has.all():
+            normal = given_best
+        else:
+            normal = self._normals(p, on_obstacle[rows, best, np.arange(n_obstacles)])
+            normal /= np.linalg.norm(normal, axis=2, keepdims=True)
+            if has.any():
+                normal = np.where(has[..., None], given_best, normal)
         grad = np.einsum("koc,kcv->kov", normal, jac[:, :3]) + np.einsum(
             "koc,kcv->kov", np.cross(p, normal), jac[:, 3:]
         )

@@ -68,7 +68,7 @@ def test_a_registered_shape_is_read_from_a_scenario_and_round_trips_through_json
     scenario_path.write_text(text.replace("- sphere:", "- cone:", 1))
     with pytest.raises(
         ScenarioError,
-        match=r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: ball, capsule, plane, sphere\)",
+        match=r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: ball, box, capsule, plane, sphere\)",
     ):
         load_scenario(scenario_path)
 
@@ -78,7 +78,7 @@ def test_result_json_obstacles_are_validated_when_read():
     with pytest.raises(ValueError, match=r"sphere\.radius: expected a finite number, got '<img"):
         obstacle_from_json({"sphere": {"center": [0.5, 0.0, 0.4], "radius": "<img src=x>"}})
     with pytest.raises(ValueError, match=r"expected a mapping of one shape key"):
-        obstacle_from_json({"box": {}})
+        obstacle_from_json({"cone": {}})
 
 
 class TwiceTime(Time):

@@ -1,4 +1,4 @@
-"""Capsule and half-space obstacles: distances against independent computations (a dense grid
+"""Box, capsule and half-space obstacles: distances against independent computations (a dense grid
 over both segments; the height of the link ends), gradients against finite differences, inside
 the shapes too (both are closed forms, never FCL), their scenario and JSON forms, and a
 time-optimal motion of the planar arm around each, checked with the independent distance."""
@@ -12,7 +12,7 @@ import pytest
 
 from modular_robots.collision import CollisionModel
 from modular_robots.exceptions import ScenarioError
-from modular_robots.obstacles import CapsuleObstacle, PlaneObstacle, obstacle_from_json, obstacle_to_json
+from modular_robots.obstacles import BoxObstacle, CapsuleObstacle, PlaneObstacle, obstacle_from_json, obstacle_to_json
 from modular_robots.obstacles._geometry import rpy_matrix
 from modular_robots.ocp.candidate import Candidate
 from modular_robots.ocp.shooting import ShootingProblem
@@ -25,6 +25,10 @@ CAPSULES = [
     CapsuleObstacle((1.3, 0.9, 0.0), 0.15, 0.6),  # a column standing in the arm's plane
     CapsuleObstacle((0.6, -1.1, 0.2), 0.1, 1.0, (0.3, 1.2, -0.4)),  # a tilted beam
     CapsuleObstacle((-0.9, 0.5, -0.05), 0.2, 0.8, (np.pi / 2, 0.0, 0.3)),  # lying across the plane
+]
+BOXES = [
+    BoxObstacle((1.4, 0.6, 0.0), (0.4, 0.3, 0.5), (0.2, 0.1, 0.7)),  # a turned block in the arm's way
+    BoxObstacle((-0.8, -0.9, 0.3), (1.2, 0.2, 0.5)),  # a fence panel whose lower edge the arm passes
 ]
 PLANES = [
     PlaneObstacle((1.6, 0.0, 0.0), (-1.0, 0.0, 0.0)),  # a wall: everything beyond x = 1.6
@@ -49,6 +53,21 @@ def _arm_capsule_clearance(q, capsule: CapsuleObstacle) -> float:
     c = np.asarray(capsule.center)
     b0, b1 = c - 0.5 * capsule.length * axis, c + 0.5 * capsule.length * axis
     return min(_grid_distance(a, b, b0, b1) for a, b in ((base, elbow), (elbow, tool))) - R_LINK - capsule.radius
+
+
+def _arm_box_clearance(q, box: BoxObstacle, samples: int = 20001) -> float:
+    """Brute force: the smallest distance of points along the links to the box (outside, the
+    distance to the clamped point; inside, minus the depth below the nearest face)."""
+    rotation, center, half = rpy_matrix(box.rpy), np.asarray(box.center), 0.5 * np.asarray(box.size)
+    s = np.linspace(0.0, 1.0, samples)[:, None]
+    best = np.inf
+    for a, b in itertools.pairwise(arm_points(q)):
+        local = (a + s * (b - a) - center) @ rotation
+        clamped = np.clip(local, -half, half)
+        outside = np.linalg.norm(local - clamped, axis=1)
+        depth = np.min(half - np.abs(local), axis=1)
+        best = min(best, float(np.where(outside > 0.0, outside, -depth).min()))
+    return best - R_LINK
 
 
 def _arm_plane_clearance(q, plane: PlaneObstacle) -> float:
@@ -78,6 +97,17 @@ def test_capsule_distance_matches_a_dense_grid_over_both_segments(capsule):
     np.testing.assert_allclose(distances, expected, atol=2e-5)
 
 
+@pytest.mark.parametrize("box", BOXES, ids=["turned-block", "fence"])
+def test_box_distance_matches_points_sampled_along_the_links(box):
+    model = CollisionModel(planar_arm(), [box])
+    configurations = _configurations(box)
+    distances = model.closest_many(configurations)[0][:, 0]
+    expected = np.array([_arm_box_clearance(q, box) for q in configurations])
+    assert expected.min() < 0.0 < expected.max()  # both sides of contact
+    assert np.all(distances <= expected + 1e-12)  # sampling can only overestimate, by about a step
+    np.testing.assert_allclose(distances, expected, atol=6e-5)
+
+
 @pytest.mark.parametrize("plane", PLANES, ids=["wall", "tilted-floor"])
 def test_plane_distance_is_the_lowest_link_end_above_it(plane):
     model = CollisionModel(planar_arm(), [plane])
@@ -88,7 +118,11 @@ def test_plane_distance_is_the_lowest_link_end_above_it(plane):
     assert min(expected) < 0.0 < max(expected)
 
 
-@pytest.mark.parametrize("obstacle", CAPSULES + PLANES, ids=["column", "tilted-beam", "lying", "wall", "floor"])
+@pytest.mark.parametrize(
+    "obstacle",
+    CAPSULES + BOXES + PLANES,
+    ids=["column", "tilted-beam", "lying", "turned-block", "fence", "wall", "floor"],
+)
 def test_gradient_matches_central_differences_inside_and_outside(obstacle):
     model = CollisionModel(planar_arm(), [obstacle])
     h, checked = 1e-6, 0
@@ -117,11 +151,13 @@ def test_the_scenario_reads_both_shapes_and_refuses_bad_ones(tmp_path):
         scenario(
             "    - capsule: {center: [1.5, -1.3, 1.1], radius: 0.3, length: 0.5, rpy: [0, 0.5, 0]}\n"
             "    - plane: {point: [0, 0, -0.5], normal: [0, 0, 2]}\n"
+            "    - box: {center: [-1.2, 2.1, 0.8], size: [0.2, 0.4, 0.6], rpy: [0, 0, 0.5]}\n"
         )
     ).task
     assert task.obstacles == (
         CapsuleObstacle((1.5, -1.3, 1.1), 0.3, 0.5, (0.0, 0.5, 0.0)),
         PlaneObstacle((0.0, 0.0, -0.5), (0.0, 0.0, 1.0)),
+        BoxObstacle((-1.2, 2.1, 0.8), (0.2, 0.4, 0.6), (0.0, 0.0, 0.5)),
     )
     for o in task.obstacles:
         assert obstacle_from_json(obstacle_to_json(o)) == o
@@ -129,7 +165,7 @@ def test_the_scenario_reads_both_shapes_and_refuses_bad_ones(tmp_path):
         "    - plane: {point: [0, 0, -0.5], normal: [0, 0, 0]}\n": r"task\.obstacles\[0\]\.plane\.normal: expected a non-zero vector",
         "    - capsule: {center: [1.5, -1.3, 1.1], radius: 0.3, length: 0}\n": r"task\.obstacles\[0\]\.capsule\.length: expected a number > 0",
         "    - plane: {point: [0, 0, 0.5], normal: [0, 0, 1]}\n": r"task\.obstacles\[0\]\.plane: the obstacle contains the robot's base",
-        "    - cone: {center: [1, 1, 1]}\n": r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: capsule, plane, sphere\)",
+        "    - cone: {center: [1, 1, 1]}\n": r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: box, capsule, plane, sphere\)",
     }
     for obstacles, message in bad.items():
         with pytest.raises(ScenarioError, match=message):
@@ -138,14 +174,22 @@ def test_the_scenario_reads_both_shapes_and_refuses_bad_ones(tmp_path):
 
 @pytest.mark.parametrize(
     "obstacle",
-    [CapsuleObstacle((1.75, 0.0, 0.0), 0.12, 0.6), PlaneObstacle((1.6, 0.0, 0.0), (-1.0, 0.0, 0.0))],
-    ids=["column", "wall"],
+    [
+        CapsuleObstacle((1.75, 0.0, 0.0), 0.12, 0.6),
+        BoxObstacle((1.8, 0.0, 0.0), (0.25, 0.3, 0.4), (0.0, 0.0, 0.4)),
+        PlaneObstacle((1.6, 0.0, 0.0), (-1.0, 0.0, 0.0)),
+    ],
+    ids=["column", "block", "wall"],
 )
 def test_the_time_optimal_motion_goes_round_each_shape(obstacle):
     """The stretched arm sweeps through x = 2 on its straight line: both shapes are in the way.
     The verified plan keeps clear at every millisecond by the independent distance."""
     line = [np.asarray(ARM_START) + s * (np.asarray(ARM_GOAL) - ARM_START) for s in np.linspace(0, 1, 101)]
-    independent = _arm_capsule_clearance if isinstance(obstacle, CapsuleObstacle) else _arm_plane_clearance
+    independent = {
+        CapsuleObstacle: _arm_capsule_clearance,
+        BoxObstacle: _arm_box_clearance,
+        PlaneObstacle: _arm_plane_clearance,
+    }[type(obstacle)]
     assert min(independent(q, obstacle) for q in line[40:61]) < -0.1
     problem = ShootingProblem(
         planar_arm(), ARM_START, ARM_GOAL, [obstacle], "time", OptimizerSettings(nodes=8, substeps=4)

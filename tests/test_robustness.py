@@ -397,8 +397,8 @@ def test_filter_checks_its_output_before_step_b(tmp_path):
         ("threshold: 0.5", "threshold: 1.0e6\n  bogus: 1", "pruning.bogus: unknown key"),  # 1.0e6 read as a number
         (
             "obstacles:\n    - sphere:",
-            "obstacles:\n    - box:",
-            "task.obstacles[0].box: unknown key (expected one of: capsule, plane, sphere)",
+            "obstacles:\n    - cone:",
+            "task.obstacles[0].cone: unknown key (expected one of: box, capsule, plane, sphere)",
         ),
     ],
 )

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from .base import Obstacle, Witness
+from .box import BoxObstacle
 from .capsule import CapsuleObstacle
 from .plane import PlaneObstacle
 from .sphere import SphereObstacle
@@ -21,6 +22,7 @@ __all__ = [
     "Obstacle",
     "Witness",
     "SphereObstacle",
+    "BoxObstacle",
     "CapsuleObstacle",
     "PlaneObstacle",
     "SHAPES",
@@ -30,7 +32,9 @@ __all__ = [
 ]
 
 #: Every shape, by its key in a scenario's ``task.obstacles`` and in ``result.json``.
-SHAPES: dict[str, type[Obstacle]] = {cls.kind: cls for cls in (SphereObstacle, CapsuleObstacle, PlaneObstacle)}
+SHAPES: dict[str, type[Obstacle]] = {
+    cls.kind: cls for cls in (SphereObstacle, BoxObstacle, CapsuleObstacle, PlaneObstacle)
+}
 
 
 def obstacle_from_fields(item: Fields) -> Obstacle:

@@ -20,8 +20,11 @@ if TYPE_CHECKING:
 
 __all__ = ["Obstacle", "Witness"]
 
-#: Signed distance [m] and the witness points on the robot and on the obstacle (base frame).
-Witness = tuple[float, np.ndarray, np.ndarray]
+#: Signed distance [m], the witness points on the robot and on the obstacle (base frame), and the
+#: distance's gradient with respect to a translation of the robot's witness point (a unit vector,
+#: or shorter where the distance has a kink), or None: the shape's :meth:`Obstacle.normals` gives
+#: its direction from the witness points.
+Witness = tuple[float, np.ndarray, np.ndarray, np.ndarray | None]
 
 
 @runtime_checkable
@@ -105,8 +108,10 @@ class Obstacle(Protocol):
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
         """Directions ``(K, O, 3)`` (not normalised) in which the signed distance grows when the
         robot's witness point ``on_robot`` moves; witness points ``(K, O, 3)`` of the obstacles
-        of ``batch``. Right inside the shape too: where :meth:`signed_distance` returns None, the
-        witness points are FCL's, and ``on_robot - on_obstacle`` points the wrong way there."""
+        of ``batch``. Used where a distance came without its gradient (FCL's, or a
+        :meth:`signed_distance` that gave None). Right inside the shape too: where
+        :meth:`signed_distance` returns None, the witness points are FCL's, and
+        ``on_robot - on_obstacle`` points the wrong way there."""
         ...
 
     def page(self, grow: float = 0.0) -> list[dict[str, Any]]:

@@ -125,7 +125,7 @@ class CapsuleObstacle:
         # crossing axes: any direction across both (the distance is -r - R either way)
         toward = (on_robot_axis - on_axis) / apart if apart > 0.0 else _across(d1, direction)
         distance = apart - radius - self.radius
-        return distance, on_robot_axis - radius * toward, on_axis + self.radius * toward
+        return distance, on_robot_axis - radius * toward, on_axis + self.radius * toward, toward
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:

@@ -105,7 +105,7 @@ class PlaneObstacle:
         heights = ends @ n - self.offset
         low = int(np.argmin(heights))
         end, height = ends[low], float(heights[low])
-        return height - radius, end - radius * n, end - height * n
+        return height - radius, end - radius * n, end - height * n, n
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:

@@ -100,7 +100,10 @@ class SphereObstacle:
         return gap, gap
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
-        return capsule_sphere(mid, axis, length, radius, np.asarray(self.center, dtype=float), self.radius)
+        d, on_robot, on_obstacle = capsule_sphere(
+            mid, axis, length, radius, np.asarray(self.center, dtype=float), self.radius
+        )
+        return d, on_robot, on_obstacle, None  # normals() from the witness points, as for FCL's
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
@@ -116,7 +119,7 @@ class SphereObstacle:
 
 def capsule_sphere(
     mid: np.ndarray, axis: np.ndarray, length: float, radius: float, center: np.ndarray, obstacle_radius: float
-) -> Witness:
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Signed distance [m] and witness points (on the capsule, on the sphere) of a capsule (axis
     midpoint ``mid``, unit ``axis``, ``length``, ``radius``; a sphere when ``length`` is 0) and a
     sphere: the distance from the sphere's centre to the capsule's axis segment, less both radii.
