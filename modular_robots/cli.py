@@ -17,6 +17,7 @@ from .cli_inputs import (
     ExistingPath,
     Number,
     address_option,
+    distinct_files,
     engine_option,
     existing_file,
     file_name,
@@ -45,14 +46,14 @@ from .feasibility import (
     estimate_seconds,
     filter_compositions,
 )
-from .folder import atomic_write, check_writable
+from .folder import LOCK, atomic_write, check_writable
 from .pipeline import optimize_composition, run_scenario, with_execution, with_pruning
-from .report import export_controller_rate
+from .report import RESULT, WINNER_FILES, export_controller_rate, is_export
 from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .timor import import_timor
 from .urdf import write_urdf
-from .verdicts import VerdictFile
-from .viewer import write_viewer
+from .verdicts import VerdictFile, lock_path
+from .viewer import VIEWER, write_viewer
 
 __all__ = ["main"]
 
@@ -78,6 +79,19 @@ def _execution(scenario, engine: str | None, address: str | None):
 
 def _on_ray(scenario) -> bool:
     return scenario.execution.engine == "ray"
+
+
+def _scenario_files(label: str, path: Path, catalog) -> list[tuple[str, Path | None]]:
+    """The files a command read for the scenario (or catalogue) ``path``: it and its catalogue."""
+    return [(label, path), (f"the catalogue of {label}", Path(catalog.source) if catalog.source else None)]
+
+
+def _results_files(out: Path) -> list[tuple[str, Path | None]]:
+    """The files a run writes (or replaces, or removes) in the results folder ``out``."""
+    names = [RESULT, *WINNER_FILES, VIEWER, LOCK]
+    with contextlib.suppress(OSError):
+        names += sorted(p.name for p in out.iterdir() if is_export(p.name))
+    return [("--out", out / name) for name in names]
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -139,6 +153,7 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
             param_hint="COMPOSITION",
         )
     scenario, catalog = load_scenario_or_catalog(source)
+    distinct_files([("-o", output)], _scenario_files("--scenario", source, catalog))
     if payload is None:
         payload = scenario.task.payload if scenario else 0.0
     chain = Composition.from_name(composition, catalog)
@@ -158,6 +173,7 @@ def urdf_command(composition: str, source: Path, payload: float | None, output: 
 @user_errors
 def import_timor_command(modules_json: Path, overrides: Path | None, output: Path) -> None:
     """Convert a Timor module database (modules.json) to a general catalogue YAML."""
+    distinct_files([("-o", output)], [("MODULES_JSON", modules_json), ("--overrides", overrides)])
     result = import_timor(modules_json, overrides)
     atomic_write(output, result.yaml())
     for line in result.overrides:
@@ -196,7 +212,8 @@ def import_timor_command(modules_json: Path, overrides: Path | None, output: Pat
     callback=file_name("JSON Lines"),
     default=None,
     help="Write every verdict to this file as it comes (one JSON line per composition, flushed); if the "
-    "file holds verdicts already (an interrupted filter), resume after them.",
+    "file holds this run's verdicts already (an interrupted filter), resume after them. Any other file is "
+    "refused, untouched; one filter writes a file at a time.",
 )
 @click.option(
     "--limit",
@@ -219,6 +236,10 @@ def filter_command(
 ) -> None:
     """Step B: which compositions can hold the start and the goal (reach, IK, torque, collision)."""
     scenario = _execution(load_scenario(scenario_path), engine, address)
+    distinct_files(
+        [("--out", out), ("--verdicts", verdicts), ("the lock of --verdicts", verdicts and lock_path(verdicts))],
+        _scenario_files("SCENARIO", scenario_path, scenario.catalog),
+    )
     settings = FeasibilitySettings(seeds=seeds)
     for path in (out, verdicts):
         if path is not None:
@@ -296,6 +317,11 @@ def optimize_command(
     ``run``); NAME+clear or NAME+fastest optimises from that pair only.
     """
     scenario = load_scenario(scenario_path)
+    distinct_files(
+        _results_files(out),
+        _scenario_files("--scenario", scenario_path, scenario.catalog),
+        "a results folder apart from the scenario and its catalogue",
+    )
     overrides: dict[str, Any] = {
         k: v for k, v in (("transcription", transcription), ("max_iterations", max_iterations)) if v
     }
@@ -368,6 +394,11 @@ def run_command(
     if threshold is not None and scenario.pruning.rule == "none":
         click.echo(f"warning: --threshold {threshold:g} has no effect: the rule none never prunes", err=True)
     out = out or Path("results") / scenario.name
+    distinct_files(
+        _results_files(out),
+        _scenario_files("SCENARIO", scenario_path, scenario.catalog),
+        "a results folder apart from the scenario and its catalogue",
+    )
     _space(scenario, make_engine(jobs, scenario.execution).jobs, max_compositions)
     click.echo(
         f"{scenario.name}: rule {scenario.pruning.rule}"

@@ -11,12 +11,13 @@ import math
 import os
 import signal
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 import click
 
-from .exceptions import ModularRobotsError, Terminated, shorten
-from .execution import ENGINES, JOBS_PER_CORE, available_cores, max_jobs, terminations_raise
+from .exceptions import InputError, ModularRobotsError, Terminated, shorten
+from .execution import ENGINES, JOBS_PER_CORE, address_problem, available_cores, max_jobs, terminations_raise
 from .feasibility import MAX_COMPOSITIONS
 
 __all__ = [
@@ -31,6 +32,8 @@ __all__ = [
     "engine_option",
     "address_option",
     "max_compositions_option",
+    "distinct_files",
+    "same_file",
     "NAME_MAX",
     "PATH_MAX",
 ]
@@ -187,6 +190,48 @@ def file_name(kind: str):
     return check
 
 
+def same_file(a: Path, b: Path) -> bool:
+    """Whether the paths ``a`` and ``b`` name one file: the same path once links are followed, or
+    (where both exist) the same file under two names (``os.path.samefile``: a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def distinct_files(
+    outputs: Iterable[tuple[str, Path | None]],
+    inputs: Iterable[tuple[str, Path | None]],
+    expected: str = "a file of its own",
+) -> None:
+    """Refuse, before any write, an output that is one of the command's inputs or another of its
+    outputs (:func:`same_file`): ``-o`` naming the database it converts, ``--verdicts`` naming the
+    scenario or ``--out``. Each is a ``(label, path)`` pair (the option or argument that names it,
+    its path; ``None`` for an option not given); ``expected`` ends the refusal.
+
+    Raises
+    ------
+    InputError
+        Naming the output's option and path, the input or output it is, and what was expected.
+    """
+    read = [(label, path) for label, path in inputs if path is not None]
+    written: list[tuple[str, Path]] = []
+    for label, path in outputs:
+        if path is None:
+            continue
+        for others, verb in ((read, "reads"), (written, "writes")):
+            for other_label, other in others:
+                if same_file(path, other):
+                    also = "" if str(other) == str(path) else f" ({shorten(str(other), 200, quote=False)})"
+                    raise InputError(
+                        f"{label}: {shorten(str(path), 200, quote=False)} is {other_label}{also}, which this command "
+                        f"{verb}; expected {expected}"
+                    )
+        written.append((label, path))
+
+
 class ExistingPath(click.ParamType):
     """An existing file (or folder) to read; its problems said in one short line."""
 
@@ -251,8 +296,9 @@ engine_option = click.option(
 
 
 def _ray_address(ctx, param, text: str | None) -> str | None:
-    if text is not None and (not text.strip() or text != text.strip() or len(text) > 300):
-        raise click.BadParameter(f"expected a Ray address (auto, host:port or ray://host:port), got {shorten(text)}")
+    problem = None if text is None else address_problem(text)
+    if problem:
+        raise click.BadParameter(problem)
     return text
 
 

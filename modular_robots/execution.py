@@ -25,26 +25,34 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
+import functools
 import itertools
 import multiprocessing
 import os
+import pickle
+import resource
 import signal
 import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Protocol, TypedDict, TypeVar
 
 from threadpoolctl import ThreadpoolController, threadpool_limits
 
-from .exceptions import InputError, ModularRobotsError, Terminated, shorten
+from .exceptions import EngineError, InputError, ModularRobotsError, Terminated, shorten
 
 __all__ = [
     "ENGINES",
+    "CONNECT_TIMEOUT",
     "ExecutionSettings",
+    "address_problem",
+    "split_address",
     "Lost",
     "Engine",
     "SerialEngine",
@@ -68,14 +76,62 @@ R = TypeVar("R")
 ENGINES = ("process", "ray")
 
 
+#: How long connecting to a Ray cluster at an address may take before the run gives up [s]: the
+#: default of ``execution.connect_timeout``.
+CONNECT_TIMEOUT = 10.0
+
+
 @dataclass(frozen=True)
 class ExecutionSettings:
     """The engine that runs steps B-D (one of :data:`ENGINES`) and, for ``ray``, the ``address``
     of a running cluster (``auto``: the one started on this machine with ``ray start --head``;
-    ``host:port``; None: a Ray instance of this process's own, with ``jobs`` CPUs)."""
+    ``host:port``; None: a Ray instance of this process's own, with ``jobs`` CPUs), reached
+    within ``connect_timeout`` seconds."""
 
     engine: str = "process"
     address: str | None = None
+    connect_timeout: float = CONNECT_TIMEOUT
+
+
+#: The forms of a Ray address, as said in errors.
+ADDRESS_FORMS = "auto, host:port or ray://host:port"
+
+
+def address_problem(text: str) -> str | None:
+    """Why ``text`` is not a Ray address (``auto``, ``host:port``, ``ray://host:port``; an IPv6
+    host in brackets), as an error's message; None if it is one. Said when the address is read,
+    before any work: an address that cannot lead anywhere would only fail on connecting."""
+    expected = f"expected a Ray address ({ADDRESS_FORMS}), got {shorten(text)}"
+    if text == "auto":
+        return None
+    if not text.strip() or text != text.strip() or len(text) > 300:
+        return expected
+    try:
+        split_address(text)
+    except ValueError as exc:
+        return f"{expected}: {exc}"
+    return None
+
+
+def split_address(text: str) -> tuple[str, int]:
+    """The host and port of a Ray address ``host:port`` or ``ray://host:port``.
+
+    Raises
+    ------
+    ValueError
+        Saying what is wrong: no port, a port outside 1 to 65535, no host or a host with spaces.
+    """
+    rest = text.removeprefix("ray://")
+    host, colon, port = rest.rpartition(":")
+    if not colon:
+        raise ValueError("no port (host:port)")
+    if host.startswith("[") and host.endswith("]"):  # [::1]:6379
+        host = host[1:-1]
+    if not host or any(c.isspace() or c in "/[]@?#" for c in host):
+        raise ValueError(f"{shorten(host)} is not a host name or IP address")
+    if not (port.isascii() and port.isdigit() and 0 < int(port) <= 65535):
+        raise ValueError(f"{shorten(port)} is not a port (1 to 65535)")
+    return host, int(port)
 
 
 @dataclass(frozen=True)
@@ -367,7 +423,9 @@ def _run_in_worker(work: Callable, chunk: list) -> list:
 class ProcessEngine:
     """A pool of ``jobs`` worker processes; the context is sent once to each worker.
 
-    At most ``jobs * window`` chunks are in flight, so a long stream is never materialised.
+    At most ``jobs * window`` chunks are in flight, so a long stream is never materialised. A
+    stream that ends early (an error, an interruption, a reader that stops) stops the workers at
+    once (:func:`_end_pool`).
     """
 
     def __init__(self, jobs: int | None = None, window: int = 16):
@@ -375,22 +433,101 @@ class ProcessEngine:
         self.window = window
 
     def map_chunks(self, work, context, items, chunksize=16):
-        with ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(os.getpid(), context)) as pool:
-            pending: deque = deque()
-            try:
-                for index, chunk in enumerate(_chunks(items, chunksize)):
-                    with _signals_held() if index == 0 else contextlib.nullcontext():  # the first starts the workers
-                        pending.append(pool.submit(_run_in_worker, work, chunk))
-                    if len(pending) >= self.jobs * self.window:
-                        yield from pending.popleft().result()
-                while pending:
-                    yield from pending.popleft().result()
-            finally:
-                for future in pending:
-                    future.cancel()
+        pool = _started(
+            self.jobs,  # its queues' pipes
+            lambda: ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(os.getpid(), context)),
+        )
+        workers = pool._processes  # the pool fills it as it starts them (see _end_pool)
+        pending: deque = deque()
+        finished = False
+        try:
+            for index, chunk in enumerate(_chunks(items, chunksize)):
+                if index == 0:  # the first starts the workers
+                    with _signals_held():
+                        pending.append(_started(self.jobs, functools.partial(pool.submit, _run_in_worker, work, chunk)))
+                else:
+                    pending.append(pool.submit(_run_in_worker, work, chunk))
+                if len(pending) >= self.jobs * self.window:
+                    yield from _result(pending.popleft())
+            while pending:
+                yield from _result(pending.popleft())
+            finished = True
+        finally:
+            _end_pool(pool, workers, finished)
+            del pool, workers  # its pipes closed now, not with a traceback that holds this frame
 
     def close(self) -> None:
         pass
+
+
+def _result(future: Future) -> Any:
+    """The result of a chunk's ``future``; a worker that died under it (killed, out of memory) is
+    said in one line."""
+    try:
+        return future.result()
+    except BrokenProcessPool as exc:
+        reason = str(exc)
+    raise ModularRobotsError(f"a worker process died ({reason}); out of memory? (see ulimit -v, dmesg)")
+
+
+def _end_pool(pool: ProcessPoolExecutor, workers: Mapping[int, Any], finished: bool) -> None:
+    """Shut ``pool`` down, and with it every one of its ``workers`` (its ``_processes``).
+
+    After a stream that did not finish, the workers are stopped at once (their chunks' results
+    are not wanted), and the chunks not yet started are cancelled by the pool's own thread
+    (``cancel_futures``): the thread that completes the futures is the only one to change their
+    state. Cancelling them from here raced with it: Python 3.11's pool marks every pending
+    future failed when a worker dies (as on a ``SIGTERM`` sent to the process group, which ends
+    the workers with the parent), and one cancelled here in the meantime made that thread raise
+    ``InvalidStateError``, printed as a traceback.
+
+    A pool whose start failed (out of file descriptors, of memory for a thread) has no thread to
+    stop the workers it did start, and the interpreter's exit waits for them (they are not
+    daemons): they are stopped here too.
+    """
+    if not finished:
+        for proc in list(workers.values()):
+            with contextlib.suppress(OSError, ValueError, AttributeError):  # already ended
+                proc.terminate()  # the pool's thread sees them end, and fails what is left
+    with contextlib.suppress(RuntimeError):  # its thread could not be started: none to wait for
+        pool.shutdown(wait=True, cancel_futures=not finished)
+    _stop([proc for proc in list(workers.values()) if proc.is_alive()])
+
+
+def _stop(procs: Sequence[Any], grace: float = 5.0) -> None:
+    """Stop worker processes: ``SIGTERM`` (which ends a worker at once, :func:`_quiet_worker_signals`),
+    then ``SIGKILL`` for one still there after ``grace`` seconds; each is waited for."""
+    for proc in procs:
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # already ended, or never started
+            proc.terminate()
+    for proc in procs:
+        with contextlib.suppress(OSError, ValueError, AttributeError, AssertionError):
+            proc.join(grace)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+
+
+def _started(jobs: int, start: Callable[[], T]) -> T:
+    """``start()``, which starts worker processes; a failure to start them (a resource limit) is
+    said in one line, as an :class:`~modular_robots.exceptions.EngineError`. It is raised after
+    the failure is let go, with the frames that hold the half-made pool and its pipes: a run out
+    of file descriptors needs them to record its ending."""
+    try:
+        return start()
+    except (OSError, RuntimeError) as exc:  # RuntimeError: "can't start new thread"
+        reason = _start_failure(exc)
+    raise EngineError(f"cannot start {jobs} worker process(es): {reason}")
+
+
+def _start_failure(exc: BaseException) -> str:
+    reason = (exc.strerror if isinstance(exc, OSError) else None) or str(exc) or type(exc).__name__
+    if isinstance(exc, OSError) and exc.errno == errno.EMFILE:
+        soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+        return f"{reason} (at most {soft} here, ulimit -n; raise it or use fewer --jobs)"
+    if isinstance(exc, MemoryError) or (isinstance(exc, OSError) and exc.errno in (errno.ENOMEM, errno.EAGAIN)):
+        return f"{reason} (out of memory or of processes: see ulimit -v and -u; or use fewer --jobs)"
+    return reason
 
 
 def make_engine(jobs: int | None = None, execution: ExecutionSettings | None = None) -> Engine:
@@ -402,7 +539,7 @@ def make_engine(jobs: int | None = None, execution: ExecutionSettings | None = N
     if execution is not None and execution.engine == "ray":
         from .ray_engine import RayEngine
 
-        return RayEngine(execution.address, jobs)
+        return RayEngine(execution.address, jobs, connect_timeout=execution.connect_timeout)
     return SerialEngine() if jobs == 1 else ProcessEngine(jobs)
 
 
@@ -483,17 +620,39 @@ def _worker(parent, conn, factory, context, specs, names) -> None:
     try:
         while True:
             command, names = conn.recv()
-            if command == "advance":
-                conn.send(executor.advance(names))
-            elif command == "stop":
-                conn.send(executor.stop(names))
-            else:
+            if command not in ("advance", "stop"):
                 break
-    except (EOFError, KeyboardInterrupt):
+            try:
+                reply = executor.advance(names) if command == "advance" else executor.stop(names)
+                conn.send(reply)
+            except (OSError, EOFError):  # the parent has gone
+                raise
+            except Exception as exc:  # the parent raises it, as it would have with jobs = 1
+                conn.send(_Failed.of(exc))
+    except (EOFError, OSError, KeyboardInterrupt):
         pass
     finally:
-        executor.shutdown()
+        with contextlib.suppress(Exception):
+            executor.shutdown()
         conn.close()
+
+
+class _Failed:
+    """A worker's reply to a command that raised: the exception, raised again in the parent (a
+    worker that let it escape would print its traceback and die, and the parent would only see
+    it gone)."""
+
+    def __init__(self, exc: BaseException):
+        self.exc = exc
+
+    @classmethod
+    def of(cls, exc: BaseException) -> _Failed:
+        """``exc`` if it can be sent, else a ``RuntimeError`` saying what it was."""
+        try:
+            pickle.dumps(exc)
+            return cls(exc)
+        except Exception:
+            return cls(RuntimeError(f"{type(exc).__name__}: {shorten(str(exc), 300, quote=False)}"))
 
 
 class ProcessExecutor:
@@ -508,21 +667,25 @@ class ProcessExecutor:
         jobs = max(1, min(jobs, len(self._names)))
         ctx = multiprocessing.get_context()
         self._owner = {name: i % jobs for i, name in enumerate(self._names)}
-        self._conns, self._procs = [], []
+        self._conns: list = []
+        self._procs: list = []
         self._awaiting: set[int] = set()
-        for w in range(jobs):
-            mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
-            parent, child = ctx.Pipe()
-            proc = ctx.Process(
-                target=_worker,
-                args=(os.getpid(), child, factory, context, [specs[i] for i in mine], [self._names[i] for i in mine]),
-                daemon=True,
-            )
-            with _signals_held():
-                proc.start()
-            child.close()
-            self._conns.append(parent)
-            self._procs.append(proc)
+        try:
+            for w in range(jobs):
+                mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
+                share = [specs[i] for i in mine], [self._names[i] for i in mine]
+                parent, child = _started(jobs, ctx.Pipe)
+                self._conns.append(parent)
+                proc = ctx.Process(target=_worker, args=(os.getpid(), child, factory, context, *share), daemon=True)
+                try:
+                    with _signals_held():
+                        _started(jobs, proc.start)
+                finally:
+                    child.close()
+                self._procs.append(proc)
+        except BaseException:  # the workers already started are not left waiting for commands
+            self.shutdown()
+            raise
 
     def names(self) -> list[str]:
         return list(self._names)
@@ -532,6 +695,7 @@ class ProcessExecutor:
         for name in names:
             by_worker.setdefault(self._owner[name], []).append(name)
         out = {}
+        failure: BaseException | None = None
         for w, mine in by_worker.items():
             try:
                 if w in self._awaiting:  # a reply left unread by an interruption
@@ -547,13 +711,20 @@ class ProcessExecutor:
             if w not in self._awaiting:
                 continue
             try:
-                out.update(self._conns[w].recv())
+                reply = self._conns[w].recv()
                 self._awaiting.discard(w)
             except (EOFError, OSError) as exc:
                 self._awaiting.discard(w)
                 if not tolerate_dead:
                     raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
                 out.update(dict.fromkeys(by_worker[w]))
+                continue
+            if isinstance(reply, _Failed):  # raised once every reply of the round is read
+                failure = failure or reply.exc
+            else:
+                out.update(reply)
+        if failure is not None:
+            raise failure
         return out
 
     def advance(self, names):
@@ -568,8 +739,9 @@ class ProcessExecutor:
                 conn.send(("exit", []))
         for proc in self._procs:
             proc.join(timeout=10)
-            if proc.is_alive():
-                proc.terminate()
+        _stop([proc for proc in self._procs if proc.is_alive()])
+        for conn in self._conns:  # their descriptors, for what the run still writes
+            conn.close()
 
 
 def make_executor(
@@ -587,7 +759,15 @@ def make_executor(
     if execution is not None and execution.engine == "ray":
         from .ray_engine import RayExecutor
 
-        return RayExecutor(factory, context, specs, names, execution.address, jobs or available_cores())
+        return RayExecutor(
+            factory,
+            context,
+            specs,
+            names,
+            execution.address,
+            jobs or available_cores(),
+            connect_timeout=execution.connect_timeout,
+        )
     jobs = resolve_jobs(jobs)
     if jobs == 1:
         return InProcessExecutor(factory, context, specs, names)

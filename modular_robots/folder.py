@@ -5,7 +5,8 @@ not ours.
 the process ends, however it ends) while a run, an export or a page writes into the folder; a
 second one is refused with :class:`FolderBusyError`. The lock file is opened without following a
 link and must be a regular file with no other name, so a planted ``.lock`` cannot make us write
-into another file. Every file is written to a temporary name unique to the writer and marked as
+into another file; that lock (:class:`FileLock`) also guards a verdicts file ``filter`` appends
+to. Every file is written to a temporary name unique to the writer and marked as
 ours (:data:`TEMPORARY_MARK`), then renamed into place (:func:`atomic_write`), so a reader, a
 crash or a full disk never leaves half a file under a result's name; a failed write removes its
 temporary file, and a crashed writer's is removed by the next lock holder, recognised by its mark
@@ -29,6 +30,7 @@ from .exceptions import FolderBusyError, ResultsFolderError, shorten
 
 __all__ = [
     "ResultsFolder",
+    "FileLock",
     "FolderBusyError",
     "atomic_write",
     "atomic_path",
@@ -106,8 +108,97 @@ def check_writable(folder: str | Path) -> None:
     os.unlink(tmp)
 
 
+class FileLock:
+    """An exclusive lock of one writer on what ``subject`` names (a results folder, a verdicts
+    file): an ``flock`` on the lock file ``path``, created if missing and removed on release; the
+    kernel releases it when the process ends, however it ends. A second holder is refused with
+    :class:`FolderBusyError`; a lock file that is a link, a device, a pipe or a file with another
+    name is refused with :class:`ResultsFolderError` and left untouched.
+
+    Parameters
+    ----------
+    path
+        The lock file.
+    subject
+        What the messages name (the folder, the file) and the lock guards.
+    kind
+        What ``subject`` is, for the messages (``"results folder"``, ``"verdicts file"``).
+    busy
+        What the refusal says another holder is doing (``"another run is writing into this
+        results folder"``).
+    hint
+        What the refusal tells the user to do.
+    """
+
+    def __init__(self, path: str | Path, subject: str | Path, kind: str, busy: str, hint: str):
+        self.path = Path(path)
+        self.subject, self.kind, self.busy, self.hint = subject, kind, busy, hint
+        self._fd: int | None = None
+
+    def __enter__(self) -> FileLock:
+        self._fd = self._lock()
+        return self
+
+    def __exit__(self, *exc: object) -> Literal[False]:
+        if self._fd is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.path)
+            os.close(self._fd)  # releases the lock
+            self._fd = None
+        return False
+
+    def _lock(self) -> int:
+        """Open and lock the lock file; retry if a finishing holder removed it between our open
+        and lock."""
+        for _ in range(10):
+            fd = self._open()
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as exc:
+                holder = _read_holder(fd)
+                os.close(fd)
+                if exc.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
+                    raise FolderBusyError(f"{self.subject}: {self.busy}{holder}; {self.hint}") from None
+                raise
+            try:
+                same = os.fstat(fd).st_ino == os.stat(self.path, follow_symlinks=False).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+                return fd
+            os.close(fd)
+        raise FolderBusyError(f"{self.subject}: could not lock the {self.kind} (its lock file keeps changing)")
+
+    def _open(self) -> int:
+        """Open the lock file, created if missing: never through a link, never a device, pipe,
+        folder or a file that has another name (a hard link), whose content we would replace."""
+        flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+        try:
+            fd = os.open(self.path, flags, 0o644)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise self._not_a_lock("a symbolic link") from None
+            if exc.errno in (errno.EISDIR, errno.ENXIO):
+                raise self._not_a_lock("a folder" if exc.errno == errno.EISDIR else "a device or socket") from None
+            raise OSError(exc.errno, exc.strerror, str(self.path.parent)) from None  # the folder is unwritable
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
+            os.close(fd)
+            raise self._not_a_lock("a file with another name too" if stat.S_ISREG(info.st_mode) else "a device or pipe")
+        return fd
+
+    def _not_a_lock(self, what: str) -> ResultsFolderError:
+        return ResultsFolderError(
+            f"{shorten(self.path, 200, quote=False)}: expected the lock file of a {self.kind}, got {what}; "
+            "remove it (no run of this package made it) and run again"
+        )
+
+
 class ResultsFolder:
-    """The folder ``path`` (created if missing), locked for one writer.
+    """The folder ``path`` (created if missing), locked for one writer (:class:`FileLock` on its
+    ``.lock``).
 
     On entering, a crashed writer's temporary files are removed (:func:`is_temporary`); nothing
     else is.
@@ -127,7 +218,7 @@ class ResultsFolder:
         self.path = Path(path)
         self.busy_hint = busy_hint
         self.create = create
-        self._fd: int | None = None
+        self._lock: FileLock | None = None
 
     def __enter__(self) -> ResultsFolder:
         if self.create:
@@ -139,7 +230,14 @@ class ResultsFolder:
                 "no such folder" if missing else "not a folder",
                 str(self.path),
             )
-        self._fd = _lock(self.path / LOCK, self.busy_hint)
+        lock = FileLock(
+            self.path / LOCK,
+            self.path,
+            "results folder",
+            "another run is writing into this results folder",
+            self.busy_hint,
+        )
+        self._lock = lock.__enter__()
         for leftover in self.path.iterdir():  # a crashed writer's, never a live one's: we hold the lock
             if is_temporary(leftover.name):
                 with contextlib.suppress(OSError):
@@ -147,11 +245,9 @@ class ResultsFolder:
         return self
 
     def __exit__(self, *exc: object) -> Literal[False]:
-        if self._fd is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(self.path / LOCK)
-            os.close(self._fd)  # releases the lock
-            self._fd = None
+        if self._lock is not None:
+            self._lock.__exit__(*exc)
+            self._lock = None
         return False
 
     def remove(self, names: Iterable[str]) -> None:
@@ -160,58 +256,6 @@ class ResultsFolder:
             if name != LOCK:
                 with contextlib.suppress(FileNotFoundError, IsADirectoryError):
                     (self.path / name).unlink()
-
-
-def _lock(path: Path, busy_hint: str) -> int:
-    """Open and lock ``path``; retry if a finishing holder removed it between our open and lock."""
-    for _ in range(10):
-        fd = _open_lock(path)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            holder = _read_holder(fd)
-            os.close(fd)
-            if exc.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
-                raise FolderBusyError(
-                    f"{path.parent}: another run is writing into this results folder{holder}; {busy_hint}"
-                ) from None
-            raise
-        try:
-            same = os.fstat(fd).st_ino == os.stat(path, follow_symlinks=False).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            os.ftruncate(fd, 0)
-            os.write(fd, f"{os.getpid()}\n".encode())
-            return fd
-        os.close(fd)
-    raise FolderBusyError(f"{path.parent}: could not lock the results folder (its lock file keeps changing)")
-
-
-def _open_lock(path: Path) -> int:
-    """Open the lock file ``path``, created if missing: never through a link, never a device,
-    pipe, folder or a file that has another name (a hard link), whose content we would replace."""
-    flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
-    try:
-        fd = os.open(path, flags, 0o644)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise _not_a_lock(path, "a symbolic link") from None
-        if exc.errno in (errno.EISDIR, errno.ENXIO):
-            raise _not_a_lock(path, "a folder" if exc.errno == errno.EISDIR else "a device or socket") from None
-        raise OSError(exc.errno, exc.strerror, str(path.parent)) from None  # the folder is unwritable
-    info = os.fstat(fd)
-    if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
-        os.close(fd)
-        raise _not_a_lock(path, "a file with another name too" if stat.S_ISREG(info.st_mode) else "a device or pipe")
-    return fd
-
-
-def _not_a_lock(path: Path, what: str) -> ResultsFolderError:
-    return ResultsFolderError(
-        f"{shorten(path, 200, quote=False)}: expected the lock file of a results folder, got {what}; "
-        "remove it (no run of this package made it) and run again"
-    )
 
 
 def _read_holder(fd: int) -> str:

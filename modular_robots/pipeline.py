@@ -10,11 +10,13 @@ the :class:`~modular_robots.recorder.RunRecorder` writes what it is given.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -22,7 +24,7 @@ from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
 from .costs import COSTS
 from .exceptions import CompositionError, InfeasibleError, Terminated, shorten
-from .execution import ExecutionSettings, make_engine, make_executor, single_threaded_blas
+from .execution import make_engine, make_executor, single_threaded_blas
 from .feasibility import (
     MAX_COMPOSITIONS,
     FeasibilitySettings,
@@ -167,9 +169,10 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
     start = time.perf_counter()
     with RunRecorder(out, scenario, jobs=engine.jobs, engine=scenario.execution.engine) as recorder:
         stream = filter_compositions(scenario, engine=engine, settings=feasibility, max_compositions=max_compositions)
-        for verdict in stream:
-            summary.add(verdict)
-            notify("feasibility", {"checked": summary.checked, "feasible": summary.feasible})
+        with contextlib.closing(cast(Generator, stream)):  # an ending stops step B's workers here, then is recorded
+            for verdict in stream:
+                summary.add(verdict)
+                notify("feasibility", {"checked": summary.checked, "feasible": summary.feasible})
         recorder.update(counts=summary.counts(), seconds={"feasibility": time.perf_counter() - start})
         if not summary.feasible:
             recorder.finish("infeasible", summary.diagnosis())
@@ -359,7 +362,9 @@ def with_execution(scenario: Scenario, engine: str | None = None, address: str |
     engine = engine or ("ray" if address is not None else scenario.execution.engine)
     if address is None and engine == scenario.execution.engine:
         address = scenario.execution.address
-    return replace(scenario, execution=ExecutionSettings(engine, address if engine == "ray" else None))
+    return replace(
+        scenario, execution=replace(scenario.execution, engine=engine, address=address if engine == "ray" else None)
+    )
 
 
 def with_pruning(scenario: Scenario, rule: str | None = None, threshold: float | None = None) -> Scenario:

@@ -30,7 +30,9 @@ import functools
 import logging
 import os
 import signal
+import socket
 import threading
+import time
 import uuid
 import warnings
 from collections import deque
@@ -40,21 +42,29 @@ from typing import Any
 from threadpoolctl import threadpool_limits
 
 from .exceptions import EngineError, shorten
-from .execution import ENDING, InProcessExecutor, Lost, _chunks
+from .execution import CONNECT_TIMEOUT, ENDING, InProcessExecutor, Lost, _chunks, split_address
 
+#: Why Ray, installed, could not be imported (said when the engine is chosen, by _require).
+_broken: Exception | None = None
 try:
     import ray
-except ImportError:  # said when the engine is chosen (_require)
+except ModuleNotFoundError as exc:  # not installed, or a module it needs is not: said by _require
     ray = None  # type: ignore[assignment]  # optional: every use follows _require()
+    if exc.name != "ray":
+        _broken = exc
+except Exception as exc:  # a broken install (a library that does not load, a version that raises)
+    ray = None  # type: ignore[assignment]
+    _broken = exc
 try:  # a private Ray module (start_local's switch): without it, start_local sets the variable only
     from ray._private import ray_constants
-except ImportError:
+except Exception:
     ray_constants = None  # type: ignore[assignment]
 
 __all__ = [
     "RayEngine",
     "RayExecutor",
     "connect",
+    "reach",
     "start_local",
     "disconnect",
     "STOP_SECONDS",
@@ -75,6 +85,11 @@ _session = {"started": False}
 
 
 def _require():
+    if ray is None and _broken is not None:
+        raise EngineError(
+            f"the ray engine cannot import Ray: {type(_broken).__name__}: {shorten(str(_broken), 200, quote=False)} "
+            "(reinstall it: pip install --force-reinstall 'modular-robots[ray]'; or use --engine process)"
+        )
     if ray is None:
         raise EngineError(
             "the ray engine needs Ray, which is not installed: pip install 'modular-robots[ray]' "
@@ -83,7 +98,7 @@ def _require():
     return ray
 
 
-def connect(address: str | None = None, jobs: int = 1) -> int:
+def connect(address: str | None = None, jobs: int = 1, timeout: float = CONNECT_TIMEOUT) -> int:
     """Connect this process to Ray (once) and return the cluster's CPUs.
 
     Parameters
@@ -93,6 +108,8 @@ def connect(address: str | None = None, jobs: int = 1) -> int:
         instance of this process's own with ``jobs`` CPUs.
     jobs
         CPUs of the instance started when ``address`` is None.
+    timeout
+        How long the cluster at ``address`` may take to answer [s] (:func:`reach`).
 
     Raises
     ------
@@ -101,19 +118,110 @@ def connect(address: str | None = None, jobs: int = 1) -> int:
     """
     _require()
     if not ray.is_initialized():
+        target = None if address is None else reach(address, timeout)
         with _signals_kept():  # ray.init makes SIGTERM exit at once: the run records its ending instead
             try:
-                if address is None:
+                if target is None:
                     start_local(jobs)
                     _session["started"] = True
                 else:
-                    ray.init(address=address, logging_level=logging.WARNING)
+                    ray.init(address=target, logging_level=logging.WARNING)
             except (ConnectionError, ValueError, RuntimeError, TimeoutError) as exc:
                 raise EngineError(
-                    f"cannot connect to the Ray cluster at {shorten(address)}: {shorten(str(exc), 300, quote=False)} "
-                    "(start one with `ray start --head`, or leave out --address for a Ray instance of this run's own)"
+                    f"{_cannot(address, target)}: {shorten(str(exc), 300, quote=False)} ({_HINT})"
                 ) from None
     return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+_HINT = "start one with `ray start --head`, or leave out --address for a Ray instance of this run's own"
+
+
+def _cannot(address: str | None, target: str | None) -> str:
+    said = shorten(address)
+    if target is not None and target != address:
+        said += f" ({shorten(target, 100, quote=False)})"
+    return f"cannot connect to the Ray cluster at {said}"
+
+
+def reach(address: str, timeout: float = CONNECT_TIMEOUT) -> str:
+    """The address to hand ``ray.init`` for ``address``, once something there has answered as a
+    Ray cluster does within ``timeout`` seconds: ``ray.init`` itself waits minutes for an address
+    where nothing listens, or where something accepts and never answers.
+
+    ``auto`` is the cluster of ``RAY_ADDRESS``, else the one ``ray start --head`` last started
+    on this machine (the address it wrote in Ray's temporary folder; a cluster whose head has
+    died leaves it behind). Without either, ``auto`` is left to Ray.
+
+    The check: a TCP connection, then the start of an HTTP/2 conversation (``grpc``, which
+    Ray's head and its client server speak) answered by the server's first frame.
+
+    Raises
+    ------
+    EngineError
+        Naming the address, if nothing answers there in time, or what does is not such a server.
+    """
+    target = _resolve(address)
+    if target is None or target == "local":
+        return address
+    try:
+        host, port = split_address(target)
+    except ValueError as exc:  # from RAY_ADDRESS or the cluster file
+        raise EngineError(f"{_cannot(address, target)}: {exc} ({_HINT})") from None
+    problem = _no_answer(host, port, timeout)
+    if problem:
+        raise EngineError(f"{_cannot(address, target)}: {problem} ({_HINT})")
+    return target
+
+
+def _resolve(address: str) -> str | None:
+    """``address``, or for ``auto`` the address Ray would find first (None: none written)."""
+    if address != "auto":
+        return address
+    if os.environ.get("RAY_ADDRESS"):
+        return os.environ["RAY_ADDRESS"]
+    written = _cluster_file()
+    try:
+        with open(written) as file:
+            return file.read(1000).strip() or None
+    except OSError:
+        return None
+
+
+def _cluster_file() -> str:
+    """Where ``ray start --head`` writes its cluster's address (Ray's temporary folder)."""
+    for variable in ("RAY_TMPDIR", "TMPDIR"):
+        if os.environ.get(variable):
+            return os.path.join(os.environ[variable], "ray", "ray_current_cluster")
+    return os.path.join(os.sep, "tmp", "ray", "ray_current_cluster")
+
+
+#: An HTTP/2 client's first words: the connection preface and an empty SETTINGS frame.
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+
+
+def _no_answer(host: str, port: int, timeout: float) -> str | None:
+    """Why nothing at ``host:port`` answers as an HTTP/2 server within ``timeout`` seconds, or
+    None: its first frame must be a SETTINGS frame (type 4)."""
+    deadline = time.monotonic() + timeout
+    header = b""
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as connection:
+            connection.sendall(_HTTP2_PREFACE)
+            while len(header) < 9:
+                connection.settimeout(max(0.001, deadline - time.monotonic()))
+                received = connection.recv(9 - len(header))
+                if not received:
+                    break
+                header += received
+    except TimeoutError:
+        return f"no answer within {timeout:g} s (execution.connect_timeout)"
+    except ConnectionRefusedError:
+        return "nothing listens there (connection refused)"
+    except OSError as exc:
+        return exc.strerror or str(exc) or type(exc).__name__
+    if len(header) < 9 or header[3] != 4:
+        return "what answers there is not a Ray cluster (not a gRPC server)"
+    return None
 
 
 def start_local(cpus: int) -> None:
@@ -247,16 +355,21 @@ class RayEngine:
         CPUs of that own instance.
     window
         Chunks in flight per CPU: enough to keep every CPU busy while results travel back.
+    connect_timeout
+        How long the cluster at ``address`` may take to answer [s] (see :func:`connect`).
     """
 
-    def __init__(self, address: str | None = None, jobs: int = 1, window: int = 4):
+    def __init__(
+        self, address: str | None = None, jobs: int = 1, window: int = 4, connect_timeout: float = CONNECT_TIMEOUT
+    ):
         _require()
         self.address, self._jobs, self.window = address, jobs, window
+        self.connect_timeout = connect_timeout
 
     @property
     def jobs(self) -> int:
         """The CPUs of the cluster (connecting to it)."""
-        return connect(self.address, self._jobs)
+        return connect(self.address, self._jobs, self.connect_timeout)
 
     def map_chunks(self, work, context, items, chunksize=16):
         cpus = self.jobs
@@ -296,7 +409,7 @@ class RayExecutor:
     factory, context, specs, names
         As for :func:`~modular_robots.execution.make_executor`: job ``names[i]`` is
         ``factory(context, specs[i])``, built in its actor when first advanced.
-    address, jobs
+    address, jobs, connect_timeout
         The cluster (see :func:`connect`).
     """
 
@@ -308,9 +421,10 @@ class RayExecutor:
         names: Sequence[str],
         address: str | None = None,
         jobs: int = 1,
+        connect_timeout: float = CONNECT_TIMEOUT,
     ):
         _require()
-        connect(address, jobs)
+        connect(address, jobs, connect_timeout)
         self._names = list(names)
         self._specs = dict(zip(self._names, specs))
         self._factory = factory

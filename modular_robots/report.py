@@ -9,6 +9,7 @@ Every file is written to a temporary name and renamed into place
 from __future__ import annotations
 
 import json
+import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -46,22 +47,22 @@ JOINTS_PLOT = "joints.png"
 PRUNING_PLOT = "pruning.png"
 #: The files a run writes besides ``result.json`` (and only when it has a winner).
 WINNER_FILES = (URDF, TRAJECTORY, JOINTS_PLOT, PRUNING_PLOT)
-#: ``export``'s files: the plan at a controller rate (:func:`export_name`) and as a ROS
-#: ``JointTrajectory``.
-JOINT_TRAJECTORY = "trajectory.json"
-_EXPORT = re.compile(r"trajectory_[0-9]+(\.[0-9]+)?hz\.csv")
+#: ``export``'s files: the plan at a controller rate as a CSV and as a ROS ``JointTrajectory``
+#: JSON, both named by the rate (:func:`export_name`); ``trajectory.json`` is the JSON's name in
+#: versions that named it once for every rate (a new run still removes it as an export).
+_EXPORT = re.compile(r"trajectory_[0-9]+(\.[0-9]+)?hz\.(csv|json)|trajectory\.json")
 
 
-def export_name(rate: float) -> str:
-    """``trajectory_<rate>hz.csv``, the rate written in full (``333.3333``, ``1000``): the name
-    says the file's exact rate."""
+def export_name(rate: float, suffix: str = ".csv") -> str:
+    """``trajectory_<rate>hz.csv`` (or ``.json``), the rate written in full (``333.3333``,
+    ``1000``): the name says the file's exact rate, so exports at two rates sit side by side."""
     text = repr(float(rate))
-    return f"trajectory_{text.removesuffix('.0')}hz.csv"
+    return f"trajectory_{text.removesuffix('.0')}hz{suffix}"
 
 
 def is_export(name: str) -> bool:
     """Whether ``name`` is one of ``export``'s files."""
-    return name == JOINT_TRAJECTORY or _EXPORT.fullmatch(name) is not None
+    return _EXPORT.fullmatch(name) is not None
 
 
 def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -> WinnerFiles:
@@ -92,31 +93,49 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     torques come from the inverse dynamics of ``winner.urdf`` with the drives of ``result.json``
     (:func:`~modular_robots.plan.trajectory.controller_rate`). Writes
     ``trajectory_<rate>hz.csv`` (:func:`export_name`; no ``qdd`` columns: the zero-order-hold
-    contract of SPEC §7) and ``trajectory.json`` (ROS ``trajectory_msgs/JointTrajectory``);
-    returns their paths. The folder is locked meanwhile, so a run cannot start into it.
+    contract of SPEC §7) and ``trajectory_<rate>hz.json`` (ROS
+    ``trajectory_msgs/JointTrajectory``); returns their paths. The folder is locked meanwhile, so
+    a run cannot start into it.
 
     Raises
     ------
     InputError
-        If the folder has no winner to export, or the plan at ``rate`` would have more than
-        :data:`~modular_robots.plan.trajectory.MAX_ROWS` rows.
+        If the folder has no winner to export, its ``result.json`` names an export's file as the
+        winner's (the export would replace what it reads), or the plan at ``rate`` would have more
+        than :data:`~modular_robots.plan.trajectory.MAX_ROWS` rows.
     FolderBusyError
         If a run is writing into the folder.
     """
     folder = Path(folder)
     with ResultsFolder(folder, busy_hint="export it once that run has ended", create=False):
         document, urdf, trajectory = read_winner(folder)
+        csv_path, json_path = folder / export_name(rate), folder / export_name(rate, ".json")
+        _refuse_replacing_inputs(folder, document, (csv_path, json_path))
         robot = winner_robot(folder, document, urdf, trajectory)
         try:
             resampled = controller_rate(trajectory, robot, rate)
         except ValueError as exc:
             raise InputError(f"{folder}: {exc}") from None
-        csv_path = folder / export_name(rate)
         with atomic_path(csv_path) as tmp:
             resampled.write_csv(tmp, accelerations=False)
-        json_path = folder / JOINT_TRAJECTORY
         atomic_write(json_path, json.dumps(joint_trajectory(resampled, robot.joint_names)) + "\n")
     return {"csv": csv_path, "json": json_path}
+
+
+def _refuse_replacing_inputs(folder: Path, document: ResultDocument, outputs: Sequence[Path]) -> None:
+    """Refuse an export whose file would replace one it reads: a ``result.json`` whose winner
+    names an export's file (or a link to one) as its URDF or trajectory, or is itself such a link.
+    Outputs are renamed into place, so only a name that leads to an output matters (a hard link
+    keeps its content)."""
+    urdf_path, trajectory_path = winner_plan_files(document, folder)
+    for what, path in ((None, folder / RESULT), ("URDF", urdf_path), ("trajectory", trajectory_path)):
+        for output in outputs:
+            if os.path.realpath(path) == os.path.realpath(output):
+                read = f"{RESULT} names {shorten(path.name)} as the winner's {what}" if what else f"{RESULT}"
+                raise InputError(
+                    f"{folder}: {read}, and that is {output.name}, which this export writes; expected the run's own "
+                    "files (export at another rate, or run again)"
+                )
 
 
 def winner_robot(folder: Path, document: ResultDocument, urdf: str, trajectory: Trajectory) -> RobotModel:

@@ -11,7 +11,7 @@ from ._yamlio import Fields, load_yaml
 from .catalog import Catalog, catalog_from_fields, load_catalog
 from .costs import COSTS
 from .exceptions import InputError, ScenarioError, shorten
-from .execution import ENGINES, ExecutionSettings
+from .execution import CONNECT_TIMEOUT, ENGINES, ExecutionSettings, address_problem
 from .obstacles import Obstacle, SphereObstacle, obstacle_from_fields
 
 __all__ = [
@@ -122,7 +122,7 @@ class Scenario:
     optimizer: OptimizerSettings = field(default_factory=OptimizerSettings)
     pruning: PruningSettings = field(default_factory=PruningSettings)
     path: Path | None = None
-    #: Where steps B-D run (``execution: {engine, address}``; the command line overrides it).
+    #: Where steps B-D run (``execution: {engine, address, connect_timeout}``; the command line overrides it).
     execution: ExecutionSettings = field(default_factory=ExecutionSettings)
 
 
@@ -258,10 +258,12 @@ def _read_execution(f: Fields | None) -> ExecutionSettings:
     address = f.string("address", default=None)
     if address is not None and engine != "ray":
         raise f.fail("address", "only the ray engine connects to a cluster; set engine: ray, or remove the key")
-    if address is not None and (address != address.strip() or len(address) > 300):
-        raise f.fail("address", f"expected a Ray address (auto, host:port or ray://host:port), got {shorten(address)}")
+    problem = None if address is None else address_problem(address)
+    if problem:
+        raise f.fail("address", problem)
+    timeout = f.number("connect_timeout", default=CONNECT_TIMEOUT, exclusive_minimum=0.0, maximum=3600.0)
     f.done()
-    return ExecutionSettings(engine, address)
+    return ExecutionSettings(engine, address, timeout)
 
 
 def load_scenario_or_catalog(path: str | Path) -> tuple[Scenario | None, Catalog]:

@@ -13,6 +13,11 @@ three principal axes and a grid of segment ends, that contains its corners or hu
 and the volume ratio primitives/shape is written in the module's ``notes``. Data that need a
 decision (a non-physical inertia, an infinite limit) are refused unless an override file gives
 them; every override applied is named in the output's ``notes``.
+
+Hostile or malformed data are refused in one line naming the file, the module and the field:
+every value is type-checked as it is read, and the catalogue written is first read back by the
+catalogue's own loader (:func:`~modular_robots.catalog.catalog_from_fields`), so that the importer
+never writes a catalogue that the other commands refuse.
 """
 
 from __future__ import annotations
@@ -20,15 +25,20 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, QhullError
 
-from .exceptions import CatalogError
-from .modules import _physical_inertia
+from ._yamlio import MAX_FILE_BYTES, MAX_MAGNITUDE, Fields, _LineLoader, load_yaml
+from .catalog import MAX_ID_LENGTH, catalog_from_fields
+from .exceptions import CatalogError, shorten
+from .modules import MAX_MASS, _physical_inertia, read_assembly_grammar
 from .urdf_assembly import rpy_from_matrix
 
 __all__ = ["import_timor", "TimorImport", "rpy_from_matrix", "fit_capsule", "shape_points"]
@@ -37,6 +47,10 @@ __all__ = ["import_timor", "TimorImport", "rpy_from_matrix", "fit_capsule", "sha
 DEFAULT_GRAMMAR = {"dof": [0, 6], "links_between_joints": [0, 3]}
 #: Grid of segment-end positions tried per axis when fitting a capsule.
 _GRID = 41
+#: The largest module database or collision mesh read [bytes]: IMPROV's is 51 kB, its meshes 30 kB.
+MAX_INPUT_BYTES = 50_000_000
+#: A converted catalogue's name when the database's folder has none (``/modules.json``).
+_FALLBACK_NAME = "timor"
 
 
 @dataclass(frozen=True)
@@ -53,11 +67,100 @@ class TimorImport:
         return header + yaml.safe_dump(self.data, sort_keys=False, width=120)
 
 
+# -- reading JSON values, each error naming where ------------------------------------------------
+@contextmanager
+def _within(where: str, sep: str = ": ") -> Iterator[None]:
+    """Prefix the :class:`CatalogError` raised inside with ``where`` (``module J2``, ``body b``):
+    ``module J2, body b: mass: ...``, ``module J1, joint Prismatic.limits.velocity: ...``."""
+    try:
+        yield
+    except CatalogError as exc:
+        message = str(exc)
+        raise CatalogError(f"{where}{', ' if message.startswith(('body ', 'joint ')) else sep}{message}") from None
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, (int, float)):
+        return f"the number {shorten(value)}"
+    if isinstance(value, str):
+        return f"the string {shorten(value)}"
+    if isinstance(value, list):
+        return f"a list of {len(value)} item(s)"
+    if isinstance(value, dict):
+        return "an object"
+    return type(value).__name__
+
+
+def _get(obj: Any, key: str, default: Any = ...) -> Any:
+    if not isinstance(obj, dict):
+        raise CatalogError(f"expected an object with {key!r}, got {_kind(obj)}")
+    if key not in obj:
+        if default is ...:
+            raise CatalogError(f"{key}: missing required key")
+        return default
+    return obj[key]
+
+
+def _number(value: Any, key: str, *, minimum: float | None = None, positive: bool = False) -> float:
+    """A finite JSON number of magnitude at most 1e9 (within the bounds given)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise CatalogError(f"{key}: expected a number, got {_kind(value)}")
+    if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:
+        raise CatalogError(f"{key}: expected a number of magnitude at most {MAX_MAGNITUDE:g}, got {shorten(value)}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise CatalogError(f"{key}: expected a finite number, got {number}")
+    if abs(number) > MAX_MAGNITUDE:
+        raise CatalogError(f"{key}: expected a number of magnitude at most {MAX_MAGNITUDE:g}, got {number:g}")
+    if minimum is not None and number < minimum:
+        raise CatalogError(f"{key}: expected a number >= {minimum:g}, got {number:g}")
+    if positive and number <= 0:
+        raise CatalogError(f"{key}: expected a number > 0, got {number:g}")
+    return number
+
+
+def _numbers(value: Any, key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """A nested JSON list of finite numbers of ``shape`` (``(3,)``, ``(3, 3)``, ``(4, 4)``)."""
+    wanted = " x ".join(map(str, shape))
+    rows = value if len(shape) == 2 else [value]
+    width = shape[-1]
+    ok = isinstance(value, list) and len(rows) == shape[0] if len(shape) == 2 else isinstance(value, list)
+    if not ok or not all(isinstance(r, list) and len(r) == width for r in rows):
+        raise CatalogError(f"{key}: expected {wanted} numbers, got {shorten(value)}")
+    out = np.array([[_number(x, key) for x in r] for r in rows], dtype=float)
+    return out if len(shape) == 2 else out[0]
+
+
+def _text(value: Any, key: str) -> str:
+    """A JSON id or name: a non-empty string (or a whole number, as text)."""
+    if isinstance(value, bool) or not isinstance(value, (str, int)) or value == "":
+        raise CatalogError(f"{key}: expected a non-empty string, got {_kind(value)}")
+    return str(value)
+
+
+def _list(value: Any, key: str) -> list:
+    if not isinstance(value, list):
+        raise CatalogError(f"{key}: expected a list, got {_kind(value)}")
+    return value
+
+
 # -- poses ------------------------------------------------------------------------------------
-def _pose(matrix) -> dict:
-    m = np.asarray(matrix, dtype=float)
-    if m.shape != (4, 4) or not np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3), atol=1e-9):
-        raise CatalogError(f"expected a 4 x 4 homogeneous transform with a rotation, got {matrix}")
+def _pose(matrix, key: str = "pose") -> dict:
+    m = _numbers(matrix, key, (4, 4)) if not isinstance(matrix, np.ndarray) else matrix
+    rotation = m[:3, :3]
+    if (
+        not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9)
+        or np.linalg.det(rotation) <= 0
+        or not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9)
+    ):
+        raise CatalogError(
+            f"{key}: expected a 4 x 4 homogeneous transform with a rotation (orthonormal, determinant 1, last row "
+            f"0 0 0 1), got {shorten(np.asarray(m).tolist(), 200)}"
+        )
     return {"xyz": [float(x) for x in m[:3, 3]], "rpy": [float(x) for x in rpy_from_matrix(m[:3, :3])]}
 
 
@@ -76,36 +179,96 @@ def _posed(pose: np.ndarray | None, position: np.ndarray, z_axis: np.ndarray) ->
 
 
 # -- collision shapes ---------------------------------------------------------------------------
+def _dimension(p: Any, key: str) -> float:
+    return _number(_get(p, key), f"parameters.{key}", positive=True)
+
+
 def shape_points(geometry: dict, folder: Path) -> list[np.ndarray]:
     """Points whose convex hull is each convex piece of a Timor geometry (its own frame): the
-    corners of a box, two rims of 64 points for a cylinder, a mesh's pieces' vertices."""
-    kind, p = geometry["type"], geometry.get("parameters", {})
+    corners of a box, two rims of 64 points for a cylinder, a mesh's pieces' vertices.
+
+    Raises
+    ------
+    CatalogError
+        For a malformed geometry, or a mesh outside ``folder`` (the database's folder must hold
+        its meshes), unreadable, or whose pieces span no volume.
+    """
+    kind, p = _get(geometry, "type"), _get(geometry, "parameters", {})
     if kind == "box":
-        half = np.array([p["x"], p["y"], p["z"]], dtype=float) / 2
+        half = np.array([_dimension(p, "x"), _dimension(p, "y"), _dimension(p, "z")]) / 2
         return [np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half]
     if kind == "cylinder":
+        r, z = _dimension(p, "r"), _dimension(p, "z")
         angle = np.linspace(0, 2 * np.pi, 64, endpoint=False)
-        rim = np.column_stack([p["r"] * np.cos(angle), p["r"] * np.sin(angle)])
-        return [np.vstack([np.column_stack([rim, np.full(64, s * p["z"] / 2)]) for s in (-1, 1)])]
+        rim = np.column_stack([r * np.cos(angle), r * np.sin(angle)])
+        return [np.vstack([np.column_stack([rim, np.full(64, s * z / 2)]) for s in (-1, 1)])]
     if kind == "mesh":
-        path = folder / p["file"]
-        if not path.is_file():
-            raise CatalogError(f"{path}: collision mesh not found (the module database's folder must hold it)")
-        scale = np.asarray(p.get("scale", [1.0, 1.0, 1.0]), dtype=float)
-        return [piece * scale for piece in _wrl_pieces(path)]
-    raise CatalogError(f"collision geometry of type {kind!r}: expected box, cylinder, sphere or mesh")
+        name = _text(_get(p, "file"), "parameters.file")
+        path = _mesh_path(folder, name)
+        scale = _numbers(_get(p, "scale", [1.0, 1.0, 1.0]), "parameters.scale", (3,))
+        if not (scale > 0).all():
+            raise CatalogError(f"parameters.scale: expected 3 numbers > 0, got {scale.tolist()}")
+        pieces = [piece * scale for piece in _wrl_pieces(path)]
+        for i, piece in enumerate(pieces):
+            _hull_volume(piece, f"{name}: piece {i + 1}")
+        return pieces
+    raise CatalogError(f"type: expected box, cylinder, sphere or mesh, got {_kind(kind)}")
+
+
+def _mesh_path(folder: Path, name: str) -> Path:
+    """The mesh file ``name`` of the database in ``folder``, which must hold it."""
+    home = folder.resolve()
+    path = (folder / name).resolve()
+    if not path.is_relative_to(home):
+        raise CatalogError(
+            f"parameters.file: {shorten(name)} is outside the module database's folder {shorten(str(home))} "
+            "(the folder must hold its meshes)"
+        )
+    if not path.is_file():
+        raise CatalogError(
+            f"parameters.file: {path}: collision mesh not found (the module database's folder must hold it)"
+        )
+    if path.stat().st_size > MAX_INPUT_BYTES:
+        raise CatalogError(
+            f"parameters.file: {path}: more than {MAX_INPUT_BYTES:,} bytes; a convex decomposition is smaller"
+        )
+    return path
 
 
 def _wrl_pieces(path: Path) -> list[np.ndarray]:
     """The vertex lists of a VRML file's ``point [...]`` blocks (one per convex piece)."""
     text = path.read_text("utf-8", errors="replace")
     pieces = []
-    for block in re.findall(r"point\s*\[([^\]]*)\]", text):
-        numbers = [float(x) for x in re.findall(r"[-+0-9.eE]+", block)]
-        pieces.append(np.array(numbers, dtype=float).reshape(-1, 3))
+    for i, block in enumerate(re.findall(r"point\s*\[([^\]]*)\]", text)):
+        where = f"{path.name}: piece {i + 1}"
+        numbers = []
+        for token in re.findall(r"[-+0-9.eE]+", block):
+            try:
+                numbers.append(float(token))
+            except ValueError:
+                raise CatalogError(f"{where}: expected x y z numbers, got {shorten(token)}") from None
+        if len(numbers) % 3:
+            raise CatalogError(f"{where}: {len(numbers)} numbers, not x y z per vertex (a multiple of 3)")
+        piece = np.array(numbers, dtype=float).reshape(-1, 3)
+        if not np.isfinite(piece).all() or np.abs(piece).max(initial=0.0) > MAX_MAGNITUDE:
+            raise CatalogError(f"{where}: expected finite vertices of magnitude at most {MAX_MAGNITUDE:g}")
+        pieces.append(piece)
     if not pieces:
         raise CatalogError(f"{path}: no 'point [ ... ]' vertex list found (expected a VRML convex decomposition)")
     return pieces
+
+
+def _hull_volume(points: np.ndarray, where: str) -> float:
+    """The volume of the convex hull of ``points``; refused if it has none."""
+    if len(points) < 4:
+        raise CatalogError(f"{where}: {len(points)} vertices span no volume (expected a convex piece of at least 4)")
+    try:
+        volume = float(ConvexHull(points).volume)
+    except QhullError:
+        volume = 0.0
+    if not volume > 0:
+        raise CatalogError(f"{where}: its {len(points)} vertices span no volume (all in one plane or line)")
+    return volume
 
 
 def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -133,40 +296,42 @@ def fit_capsule(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, floa
 
 def _shape_volume(geometry: dict, pieces: list[np.ndarray]) -> float:
     kind, p = geometry["type"], geometry.get("parameters", {})
-    if kind == "sphere":
-        return 4 / 3 * math.pi * p["r"] ** 3
     if kind == "cylinder":
         return math.pi * p["r"] ** 2 * p["z"]
     if kind == "box":
         return p["x"] * p["y"] * p["z"]
-    return float(sum(ConvexHull(piece).volume for piece in pieces))
+    return float(sum(_hull_volume(piece, "") for piece in pieces))
 
 
-def _collision(body: dict, folder: Path) -> tuple[list[dict], str]:
+def _collision(body: dict, body_id: str, folder: Path) -> tuple[list[dict], str]:
     shapes, shape_volume, prim_volume, kinds = [], 0.0, 0.0, []
-    for geometry in body.get("collision", []):
-        pose = np.asarray(geometry.get("pose", np.eye(4)), dtype=float)
-        kinds.append(geometry["type"])
-        if geometry["type"] == "sphere":
-            r = float(geometry["parameters"]["r"])
-            shapes.append({"shape": "sphere", "radius": r, "pose": _pose(pose)})
-            shape_volume += 4 / 3 * math.pi * r**3
-            prim_volume += 4 / 3 * math.pi * r**3
-            continue
-        pieces = shape_points(geometry, folder)
-        shape_volume += _shape_volume(geometry, pieces)
-        for piece in pieces:
-            centre, axis, radius, length = fit_capsule(piece)
-            prim_volume += math.pi * radius**2 * length + 4 / 3 * math.pi * radius**3
-            shape: dict[str, object] = {"shape": "capsule" if length > 1e-9 else "sphere", "radius": radius}
-            if length > 1e-9:
-                shape["length"] = length
-            shape["pose"] = _posed(pose, centre, axis)
-            shapes.append(shape)
+    for i, geometry in enumerate(_list(_get(body, "collision", []), "collision")):
+        with _within(f"collision[{i}]"):
+            pose = _numbers(_get(geometry, "pose", np.eye(4).tolist()), "pose", (4, 4))
+            _pose(pose)
+            kind = _get(geometry, "type")
+            if kind == "sphere":
+                r = _dimension(_get(geometry, "parameters", {}), "r")
+                shapes.append({"shape": "sphere", "radius": r, "pose": _pose(pose)})
+                shape_volume += 4 / 3 * math.pi * r**3
+                prim_volume += 4 / 3 * math.pi * r**3
+                kinds.append(kind)
+                continue
+            pieces = shape_points(geometry, folder)
+            kinds.append(kind)
+            shape_volume += _shape_volume(geometry, pieces)
+            for piece in pieces:
+                centre, axis, radius, length = fit_capsule(piece)
+                prim_volume += math.pi * radius**2 * length + 4 / 3 * math.pi * radius**3
+                shape: dict[str, object] = {"shape": "capsule" if length > 1e-9 else "sphere", "radius": radius}
+                if length > 1e-9:
+                    shape["length"] = length
+                shape["pose"] = _posed(pose, centre, axis)
+                shapes.append(shape)
     note = ""
     if shapes:
         note = (
-            f"body {body['ID']}: {'+'.join(kinds)} -> {len(shapes)} primitive(s), volume ratio "
+            f"body {body_id}: {'+'.join(kinds)} -> {len(shapes)} primitive(s), volume ratio "
             f"{prim_volume / shape_volume:.2f} (primitives / Timor shape)"
         )
     return shapes, note
@@ -177,123 +342,300 @@ def _identifier(text: str) -> str:
     return re.sub(r"\W", "_", str(text))
 
 
+def _distinct(raw: list[str], what: str) -> list[str]:
+    """``raw`` as identifiers, refused if two of them are, or become, one."""
+    seen: dict[str, str] = {}
+    out = []
+    for text in raw:
+        ident = _identifier(text)
+        if ident in seen:
+            if seen[ident] == text:
+                raise CatalogError(f"{what} {shorten(text)} appears twice: expected distinct ids")
+            raise CatalogError(
+                f"{what} {shorten(seen[ident])} and {shorten(text)} both become {shorten(ident)}: expected distinct ids"
+            )
+        seen[ident] = text
+        out.append(ident)
+    return out
+
+
+def _ids(items: list, key: str) -> list[str]:
+    out = []
+    for i, item in enumerate(items):
+        with _within(f"{key}[{i}]"):
+            out.append(_text(_get(item, "ID"), "ID"))
+    return out
+
+
 def _inertia(matrix) -> list[float]:
-    m = np.asarray(matrix, dtype=float)
+    m = _numbers(matrix, "inertia", (3, 3))
+    if not np.allclose(m, m.T, rtol=1e-6, atol=1e-12):
+        raise CatalogError(f"inertia: expected a symmetric 3 x 3 matrix, got {shorten(m.tolist(), 200)}")
     return [float(m[0, 0]), float(m[1, 1]), float(m[2, 2]), float(m[0, 1]), float(m[0, 2]), float(m[1, 2])]
 
 
 def _connector(c: dict, body: str) -> dict:
+    size = _list(_get(c, "size", []), "size")
+    kind = _get(c, "type")
+    if not isinstance(kind, str) or not kind:
+        raise CatalogError(f"type: expected a non-empty string, got {_kind(kind)}")
     return {
-        "id": _identifier(c["ID"]),
-        "body": _identifier(body),
-        "pose": _pose(c["pose"]),
-        "gender": c["gender"],
-        "type": c["type"],
-        "size": [float(s) for s in c.get("size", [])],
+        "id": _identifier(_text(_get(c, "ID"), "ID")),
+        "body": body,
+        "pose": _pose(_get(c, "pose")),
+        "gender": _get(c, "gender"),
+        "type": kind,
+        "size": [_number(s, "size") for s in size],
     }
 
 
-def _limits(joint: dict, where: str, override: dict) -> dict:
-    lim = joint.get("limits", {})
-    out = {
-        "position": [lim.get("positionLower", -math.inf), lim.get("positionUpper", math.inf)],
-        "velocity": lim.get("velocity", math.inf),
-        "effort": lim.get("peakTorque", math.inf),
+def _limits(joint: dict, joint_id: str, override: dict) -> dict:
+    lim = _get(joint, "limits", {})
+    if not isinstance(lim, dict):
+        raise CatalogError(f"limits: expected an object, got {_kind(lim)}")
+
+    def value(key: str, default: float) -> float:
+        v = lim.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise CatalogError(f"limits.{key}: expected a number, got {_kind(v)}")
+        return _number(v, f"limits.{key}") if isinstance(v, int) else float(v)
+
+    out: dict[str, Any] = {
+        "position": [value("positionLower", -math.inf), value("positionUpper", math.inf)],
+        "velocity": value("velocity", math.inf),
+        "effort": value("peakTorque", math.inf),
     }
-    if math.isfinite(lim.get("acceleration", math.inf)):
-        out["acceleration"] = lim["acceleration"]
+    acceleration = value("acceleration", math.inf)
+    if math.isfinite(acceleration):
+        out["acceleration"] = acceleration
     out.update(override)
-    for key, value in out.items():
-        values = value if isinstance(value, list) else [value]
-        if not all(math.isfinite(float(v)) for v in values):
+    for key, v in out.items():
+        values = v if isinstance(v, list) else [v]
+        if not all(math.isfinite(float(x)) for x in values):
             raise CatalogError(
-                f"{where}.limits.{key}: {values} is not finite; the optimiser needs finite limits: give them in the "
-                f"override file (overrides: - {{module: ..., joint: {joint['ID']}, limits: {{{key}: ...}}}})"
+                f"limits.{key}: {values} is not finite; the optimiser needs finite limits: give them in the "
+                f"override file (overrides: - {{module: ..., joint: {joint_id}, limits: {{{key}: ...}}}})"
             )
-    out["position"] = [float(v) for v in out["position"]]
-    return {k: (v if isinstance(v, list) else float(v)) for k, v in out.items()}
+    out["position"] = [_number(x, "limits.position") for x in out["position"]]
+    return {k: (v if isinstance(v, list) else _number(v, f"limits.{k}")) for k, v in out.items()}
+
+
+def _body(body: dict, module_id: str, folder: Path, overrides: dict, applied: list, notes: list, used: set):
+    raw_id = _text(_get(body, "ID"), "ID")
+    body_id = _identifier(raw_id)
+    with _within(f"body {raw_id}"):
+        mass = _number(_get(body, "mass"), "mass", minimum=0.0)
+        if mass > MAX_MASS:
+            raise CatalogError(f"mass: expected a number <= {MAX_MASS:g} kg, got {mass:g}")
+        entry: dict[str, object] = {"id": body_id, "mass": mass}
+        key = (module_id, raw_id)
+        if mass > 0 or key in overrides:
+            inertia = _inertia(_get(body, "inertia"))
+            if key in overrides:
+                o = overrides[key]
+                applied.append(
+                    f"module {module_id}, body {raw_id}: inertia {inertia} -> {o['inertia']} ({o['reason']})"
+                )
+                used.add(key)
+                inertia = [float(x) for x in o["inertia"]]
+            if mass > 0 and not _physical_inertia(tuple(inertia)):
+                raise CatalogError(
+                    f"inertia {inertia} is not physical (a principal moment above the sum of the other two, or not "
+                    "positive definite); give a corrected one in the override file (overrides: - {module, body, "
+                    "inertia, reason})"
+                )
+            if mass > 0:
+                entry.update(com=_numbers(_get(body, "r_com"), "r_com", (3,)).tolist(), inertia=inertia)
+        shapes, note = _collision(body, raw_id, folder)
+        if note:
+            notes.append(note)
+        if shapes:
+            entry["collision"] = shapes
+        connectors = []
+        for i, c in enumerate(_list(_get(body, "connectors", []), "connectors")):
+            with _within(f"connectors[{i}]"):
+                connectors.append(_connector(c, body_id))
+    return entry, connectors
 
 
 def _module(m: dict, module_id: str, folder: Path, overrides: dict, applied: list, notes: list, used: set) -> dict:
-    bodies, inlet, outlet = [], None, None
-    for body in m["bodies"]:
-        where = f"module {module_id}, body {body['ID']}"
-        inertia = _inertia(body["inertia"])
-        if (module_id, body["ID"]) in overrides:
-            o = overrides[(module_id, body["ID"])]
-            applied.append(f"{where}: inertia {inertia} -> {o['inertia']} ({o['reason']})")
-            used.add((module_id, body["ID"]))
-            inertia = [float(x) for x in o["inertia"]]
-        mass = float(body["mass"])
-        if mass > 0 and not _physical_inertia(tuple(inertia)):
-            raise CatalogError(
-                f"{where}: inertia {inertia} is not physical (a principal moment above the sum of the other two, or "
-                "not positive definite); give a corrected one in the override file (overrides: - {module, body, "
-                "inertia, reason})"
-            )
-        shapes, note = _collision(body, folder)
-        if note:
-            notes.append(note)
-        entry = {"id": _identifier(body["ID"]), "mass": mass}
-        if mass > 0:
-            entry.update(com=[float(x) for x in body["r_com"]], inertia=inertia)
-        if shapes:
-            entry["collision"] = shapes
+    bodies, connectors = [], []
+    raw_bodies = _list(_get(m, "bodies"), "bodies")
+    _distinct(_ids(raw_bodies, "bodies"), "body ids")
+    for body in raw_bodies:
+        entry, found = _body(body, module_id, folder, overrides, applied, notes, used)
         bodies.append(entry)
-        for c in body.get("connectors", []):
-            if c["gender"] == "f" or c["type"] == "base":
-                inlet = _connector(c, body["ID"])
-            else:
-                outlet = _connector(c, body["ID"])
-    if inlet is None or outlet is None:
-        raise CatalogError(f"module {module_id}: expected one female (input) and one male (output) connector")
+        connectors += found
+    for c in connectors:
+        if c["gender"] not in ("m", "f"):
+            raise CatalogError(
+                f"body {c['body']}, connector {c['id']}: gender: expected 'f' (input) or 'm' (output), got "
+                f"{_kind(c['gender'])}"
+            )
+    inlets = [c for c in connectors if c["gender"] == "f"]
+    outlets = [c for c in connectors if c["gender"] == "m"]
+    if len(inlets) != 1 or len(outlets) != 1:
+        raise CatalogError(
+            f"connectors: expected one female (input) and one male (output) connector (a serial module), got "
+            f"{len(inlets)} female and {len(outlets)} male"
+        )
     joints = []
-    for j in m.get("joints", []):
-        if j["type"] not in ("revolute", "prismatic"):
-            raise CatalogError(f"module {module_id}, joint {j['ID']}: type {j['type']!r} is not revolute or prismatic")
-        where = f"module {module_id}, joint {j['ID']}"
-        override = overrides.get((module_id, j["ID"]), {})
-        if override:
-            applied.append(f"{where}: limits {override['limits']} ({override['reason']})")
-            used.add((module_id, j["ID"]))
-        entry = {
-            "id": _identifier(j["ID"]),
-            "type": j["type"],
-            "parent": _identifier(j["parent"]),
-            "child": _identifier(j["child"]),
-            "limits": _limits(j, where, override.get("limits", {})),
-            "parent_pose": _pose(j.get("poseParent", np.eye(4))),
-            "child_pose": _pose(j.get("poseChild", np.eye(4))),
-            "gear_ratio": float(j.get("gearRatio", 1.0)),
-            "motor_inertia": float(j.get("motorInertia", 0.0)),
-            "coulomb": float(j.get("frictionCoulomb", 0.0)),
-            "viscous": float(j.get("frictionViscous", 0.0)),
-        }
+    raw_joints = _list(_get(m, "joints", []), "joints")
+    _distinct(_ids(raw_joints, "joints"), "joint ids")
+    for j in raw_joints:
+        joint_id = _text(j["ID"], "ID")
+        with _within(f"joint {joint_id}", "."):
+            kind = _get(j, "type")
+            if kind not in ("revolute", "prismatic"):
+                raise CatalogError(f"type: expected revolute or prismatic, got {_kind(kind)}")
+            override = overrides.get((module_id, joint_id), {})
+            if override:
+                applied.append(
+                    f"module {module_id}, joint {joint_id}: limits {override['limits']} ({override['reason']})"
+                )
+                used.add((module_id, joint_id))
+            entry = {
+                "id": _identifier(joint_id),
+                "type": kind,
+                "parent": _identifier(_text(_get(j, "parent"), "parent")),
+                "child": _identifier(_text(_get(j, "child"), "child")),
+                "limits": _limits(j, joint_id, override.get("limits", {})),
+                "parent_pose": _pose(_get(j, "poseParent", np.eye(4).tolist()), "poseParent"),
+                "child_pose": _pose(_get(j, "poseChild", np.eye(4).tolist()), "poseChild"),
+                "gear_ratio": _number(_get(j, "gearRatio", 1.0), "gearRatio"),
+                "motor_inertia": _number(_get(j, "motorInertia", 0.0), "motorInertia"),
+                "coulomb": _number(_get(j, "frictionCoulomb", 0.0), "frictionCoulomb"),
+                "viscous": _number(_get(j, "frictionViscous", 0.0), "frictionViscous"),
+            }
         joints.append(entry)
+    header = m["header"]
     out: dict[str, object] = {
         "id": module_id,
-        "notes": f"Timor module ID {m['header']['ID']}, name {m['header']['name']!r}",
+        "notes": f"Timor module ID {header['ID']}, name {header.get('name', '')!r}",
     }
-    out.update(bodies=bodies, joints=joints, inlet=inlet, outlet=outlet)
+    out.update(bodies=bodies, joints=joints, inlet=inlets[0], outlet=outlets[0])
     if not joints:
         del out["joints"]
     return out
 
 
+# -- the override file --------------------------------------------------------------------------
+def _plain(value: Any) -> Any:
+    """A parsed YAML value as plain dicts and lists (for ``yaml.safe_dump``)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _strings(f: Fields, key: str) -> list[str]:
+    value = f.raw(key, [])
+    f.check(key, isinstance(value, list) and all(isinstance(v, str) for v in value), "expected a list of strings")
+    return list(value)
+
+
 def _read_overrides(path: Path | None) -> dict:
+    """The override file, checked as the catalogue loader checks a file (one line per error,
+    naming the line and key)."""
     if path is None:
         return {}
-    data = yaml.safe_load(Path(path).read_text("utf-8")) or {}
-    allowed = {"name", "description", "remove", "grammar", "overrides", "notes"}
-    unknown = set(data) - allowed
-    if unknown:
-        raise CatalogError(f"{path}: unknown key(s) {sorted(unknown)} (expected some of {sorted(allowed)})")
-    for i, o in enumerate(data.get("overrides", [])):
-        if "reason" not in o or "module" not in o or ("body" in o) == ("joint" in o):
-            raise CatalogError(
-                f"{path}: overrides[{i}]: expected module, reason and one of body (+inertia) or joint (+limits)"
-            )
+    top = load_yaml(Path(path), CatalogError)
+    data: dict[str, Any] = {}
+    for key in ("name", "description"):
+        if top.has(key):
+            data[key] = top.string(key)
+    data["remove"] = _strings(top, "remove")
+    data["notes"] = _strings(top, "notes")
+    if top.has("grammar"):
+        grammar = top.mapping("grammar")
+        read_assembly_grammar(grammar)  # refused here, at its line, rather than in the catalogue written
+        data["grammar"] = _plain(top.raw("grammar"))
+    data["overrides"] = []
+    for f in top.mappings("overrides", ()):
+        o: dict[str, Any] = {"module": f.string("module"), "reason": f.string("reason")}
+        f.check("body", f.has("body") != f.has("joint"), "expected one of body (+inertia) or joint (+limits)")
+        if f.has("body"):
+            o["body"] = f.string("body")
+            o["inertia"] = list(f.vector("inertia", 6))
+        else:
+            o["joint"] = f.string("joint")
+            limits = f.mapping("limits")
+            given: dict[str, Any] = {}
+            if limits.has("position"):
+                given["position"] = list(limits.vector("position", 2))
+            for key in ("velocity", "effort", "acceleration"):
+                if limits.has(key):
+                    given[key] = limits.number(key, exclusive_minimum=0.0)
+            limits.done()
+            o["limits"] = given
+        f.done()
+        data["overrides"].append(o)
+    top.done()
     return data
+
+
+# -- the database -------------------------------------------------------------------------------
+def _read_database(path: Path) -> list:
+    try:
+        if path.stat().st_size > MAX_INPUT_BYTES:
+            raise CatalogError(f"{path}: more than {MAX_INPUT_BYTES:,} bytes; a module database is smaller")
+        db = json.loads(path.read_text("utf-8"))  # Python's json reads Timor's bare Infinity tokens
+    except RecursionError:
+        raise CatalogError(f"{path}: the JSON is nested too deeply to be a module database") from None
+    except (OSError, ValueError) as exc:
+        reason = shorten(str(exc).replace("\n", " "), 200, quote=False)
+        raise CatalogError(f"{path}: not a readable JSON module database ({reason})") from None
+    modules = db.get("modules") if isinstance(db, dict) else db
+    if not isinstance(modules, list):
+        raise CatalogError(
+            f"{path}: expected an object with a list 'modules' (or a list of modules), got "
+            f"{_kind(db) if not isinstance(db, dict) else 'modules: ' + _kind(modules)}"
+        )
+    if not modules:
+        raise CatalogError(f"{path}: no modules (expected at least a base and an effector)")
+    return modules
+
+
+def _module_ids(path: Path, modules: list) -> tuple[list[str], bool]:
+    """Each module's id (``header.name`` if all are distinct identifiers, else ``header.ID``)."""
+    raw_ids, names = [], []
+    for i, m in enumerate(modules):
+        with _within(f"{path}: modules[{i}]"):
+            header = _get(m, "header")
+            raw_ids.append(_text(_get(header, "ID"), "header.ID"))
+            name = _get(header, "name", "")
+            names.append(name if isinstance(name, str) else "")
+    if all(n.isidentifier() and len(n) <= MAX_ID_LENGTH for n in names) and len(set(names)) == len(names):
+        return names, True
+    with _within(str(path)):
+        ids = _distinct(raw_ids, "modules' header.ID")
+    for raw, ident in zip(raw_ids, ids):
+        if len(ident) > MAX_ID_LENGTH:
+            raise CatalogError(f"{path}: module {shorten(raw)}: header.ID: expected at most {MAX_ID_LENGTH} characters")
+    return ids, False
+
+
+def _check_written(result: TimorImport, path: Path, overrides: Path | None) -> None:
+    """Read ``result`` back with the catalogue loader: refuse what it would refuse, naming the
+    module and field (the first use of the catalogue would fail there)."""
+    text = result.yaml()
+    size = len(text.encode("utf-8"))
+    if size > MAX_FILE_BYTES:
+        raise CatalogError(
+            f"{path}: the catalogue would have {size:,} bytes, more than the {MAX_FILE_BYTES:,} a catalogue may have"
+        )
+    parsed = yaml.load(text, Loader=_LineLoader)  # the loader's own reading (YAML 1.2, line numbers)
+    try:
+        catalog_from_fields(Fields(parsed, Path("<catalogue>"), "", CatalogError))
+    except CatalogError as exc:
+        message = re.sub(r"^<catalogue>:\d+: ", "", str(exc))
+        match = re.match(r"modules\[(\d+)\]\.?(.*)", message)
+        if match:
+            module_id = result.data["modules"][int(match[1])]["id"]
+            raise CatalogError(f"{path}: module {module_id}: {match[2]} (the catalogue loader refuses it)") from None
+        source = overrides if overrides is not None and message.startswith(("grammar", "name", "notes")) else path
+        raise CatalogError(f"{source}: {message} (the catalogue loader refuses it)") from None
 
 
 def import_timor(modules_json: str | Path, overrides: str | Path | None = None) -> TimorImport:
@@ -302,18 +644,14 @@ def import_timor(modules_json: str | Path, overrides: str | Path | None = None) 
     Raises
     ------
     CatalogError
-        For data the model cannot take without a decision (naming the module and field).
+        For malformed data or data the model cannot take without a decision, in one line naming
+        the file, the module and the field; and for a catalogue the catalogue loader would refuse.
     """
     path = Path(modules_json)
-    try:
-        db = json.loads(path.read_text("utf-8"))  # Python's json reads Timor's bare Infinity tokens
-    except (OSError, ValueError) as exc:
-        raise CatalogError(f"{path}: not a readable JSON module database ({exc})") from None
-    modules = db["modules"] if isinstance(db, dict) else db
-    extra = _read_overrides(Path(overrides) if overrides else None)
-    names = [str(m["header"].get("name", "")) for m in modules]
-    use_names = all(n.isidentifier() for n in names) and len(set(names)) == len(names)
-    ids = names if use_names else [_identifier(m["header"]["ID"]) for m in modules]
+    overrides_path = Path(overrides) if overrides else None
+    modules = _read_database(path)
+    extra = _read_overrides(overrides_path)
+    ids, use_names = _module_ids(path, modules)
     keyed = {}
     for o in extra.get("overrides", []):
         key = (o["module"], o.get("body", o.get("joint")))
@@ -321,16 +659,28 @@ def import_timor(modules_json: str | Path, overrides: str | Path | None = None) 
     removed = set(extra.get("remove", []))
     unknown = removed - set(ids)
     if unknown:
-        raise CatalogError(f"{overrides}: remove: unknown module ids {sorted(unknown)} (known: {ids})")
+        raise CatalogError(
+            f"{overrides}: remove: unknown module ids {shorten(sorted(unknown))} (known: {shorten(ids)})"
+        )
     applied: list[str] = []
     collision: list[str] = []
     used: set = set()
-    out_modules = [
-        _module(m, i, path.parent, keyed, applied, collision, used) for m, i in zip(modules, ids) if i not in removed
-    ]
+    out_modules = []
+    for m, i in zip(modules, ids):
+        if i in removed:
+            continue
+        with _within(f"{path}: module {i}"):
+            try:
+                out_modules.append(_module(m, i, path.parent, keyed, applied, collision, used))
+            except CatalogError:
+                raise
+            except (KeyError, TypeError, ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                # every field is checked as it is read; this names the module should one escape
+                reason = shorten(str(exc).replace("\n", " "), 120, quote=False)
+                raise CatalogError(f"malformed data ({type(exc).__name__}: {reason})") from None
     missing = [k for k in keyed if k not in used and k[0] not in removed]
     if missing:
-        raise CatalogError(f"{overrides}: overrides for {missing} match no body or joint of the database")
+        raise CatalogError(f"{overrides}: overrides for {shorten(missing)} match no body or joint of the database")
     notes = [
         f"Converted from {path.parent.name}/{path.name} (Timor module database, MIT licence; see LICENSE beside it).",
         f"Module ids: Timor's header.{'name' if use_names else 'ID'}.",
@@ -341,10 +691,12 @@ def import_timor(modules_json: str | Path, overrides: str | Path | None = None) 
     notes += [f"override: {a}" for a in applied] + list(extra.get("notes", [])) + [f"collision: {c}" for c in collision]
     data = {
         "format": "general",
-        "name": extra.get("name", path.parent.name.lower()),
+        "name": extra.get("name", path.parent.name.lower() or _FALLBACK_NAME),
         "description": extra.get("description", f"Timor module database {path.parent.name}"),
         "notes": notes,
         "grammar": extra.get("grammar", DEFAULT_GRAMMAR),
         "modules": out_modules,
     }
-    return TimorImport(data, tuple(applied), tuple(collision))
+    result = TimorImport(data, tuple(applied), tuple(collision))
+    _check_written(result, path, overrides_path)
+    return result

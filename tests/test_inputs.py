@@ -323,7 +323,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
             "optimizer:",
             "execution:\n  engine: ray\n  cluster: big\noptimizer:",
             "cluster:",
-            "execution.cluster: unknown key (expected one of: address, engine)",
+            "execution.cluster: unknown key (expected one of: address, connect_timeout, engine)",
         ),
         (
             "threshold: 0.5",

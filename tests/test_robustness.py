@@ -647,7 +647,7 @@ def test_export_and_view_refuse_a_damaged_trajectory_naming_row_and_column(finis
         result = CliRunner().invoke(main, command)
         assert result.exit_code == 1, result.output
         assert result.output == f"Error: {folder}/{message}\n"
-    assert not (folder / "trajectory.json").exists()
+    assert not [p.name for p in folder.iterdir() if p.name.endswith("hz.json")]
 
 
 def test_export_and_view_refuse_a_row_that_breaks_the_acceleration_contract(finished, tmp_path):
@@ -744,7 +744,8 @@ def test_a_new_run_removes_the_old_runs_exports(finished, tmp_path):
     folder = tmp_path / "copy"
     shutil.copytree(finished, folder)
     assert CliRunner().invoke(main, ["export", str(folder), "--rate", "100"]).exit_code == 0
-    assert {"trajectory_100hz.csv", "trajectory.json"} <= {p.name for p in folder.iterdir()}
+    (folder / "trajectory.json").write_text("{}")  # the JSON's name in earlier versions: an export too
+    assert {"trajectory_100hz.csv", "trajectory_100hz.json", "trajectory.json"} <= {p.name for p in folder.iterdir()}
     infeasible = _scenario(tmp_path, "payload: 1.0", "payload: 500.0")
     result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(folder)])
     assert result.exit_code == 1
