@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
+from modular_robots.obstacles import PlaneObstacle, SphereObstacle
 from modular_robots.ocp.shooting import ShootingProblem
 from modular_robots.robot import RobotModel
 
@@ -123,9 +124,11 @@ class SymbolicRobot:
         linear = mass * (v - ca.cross(ca.DM(com), w))
         return linear, ca.DM(inertia) @ w + ca.cross(ca.DM(com), linear)
 
-    def clearance(self, q, obstacles, primitives) -> ca.SX:
+    def clearance(self, q, obstacles, primitives, measured) -> ca.SX:
         """Per obstacle, the signed distance [m] to the closest of ``primitives`` (indices into
-        ``robot.primitives``): a sphere-capsule distance, exact, as FCL's."""
+        ``robot.primitives``) that ``measured`` ``(P, O)`` pairs with it: a sphere-capsule
+        distance, exact, as FCL's; a half-space's (the floor), the capsule's lower end's height
+        less its radius, as the project's closed form."""
         model, robot = self.robot.model, self.robot
         joints = self.placements_of(q)
         segments = []
@@ -138,10 +141,19 @@ class SymbolicRobot:
             start = origin + p.offset * rot[:, 2]
             segments.append((start, p.length * rot[:, 2], p.length, p.radius))
         out = []
-        for obstacle in obstacles:
+        for j, obstacle in enumerate(obstacles):
+            kept = [segment for i, segment in enumerate(segments) if measured[i, j]]
+            if isinstance(obstacle, PlaneObstacle):
+                n = ca.DM(np.array(obstacle.normal))
+                heights = [
+                    ca.fmin(ca.dot(n, start), ca.dot(n, start + direction)) - obstacle.offset - radius
+                    for start, direction, _, radius in kept
+                ]
+                out.append(ca.mmin(ca.vertcat(*heights)))
+                continue
             center = ca.DM(np.array(obstacle.center))
             distances = []
-            for start, direction, length, radius in segments:
+            for start, direction, length, radius in kept:
                 if length > 0:
                     t = ca.fmin(ca.fmax(ca.dot(center - start, direction) / length**2, 0), 1)
                     closest = start + t * direction
@@ -177,8 +189,9 @@ class PeerNLP:
         controls = [z[problem._u0 + m * nv : problem._u0 + (m + 1) * nv] for m in range(N)]
         collision = problem.collision
         obstacles = collision.obstacles if collision else ()
-        if any(o.kind != "sphere" for o in obstacles):
-            raise NotImplementedError("the peer writes the distance to sphere obstacles only")
+        if any(not isinstance(o, SphereObstacle | PlaneObstacle) for o in obstacles):
+            raise NotImplementedError("the peer writes the distance to spheres and half-spaces (the floor) only")
+        measured = collision.measured_pairs if collision else np.ones((0, 0), dtype=bool)
         primitives = collision.primitive_indices if collision else ()
         continuity, path, middle, clear, torque = [], [], [], [], []
         for m in range(N):
@@ -195,7 +208,7 @@ class PeerNLP:
                 for j in range(S)
             ]
             if obstacles:
-                clear += [sym.clearance(states[j][0], obstacles, primitives) for j in range(S)]
+                clear += [sym.clearance(states[j][0], obstacles, primitives, measured) for j in range(S)]
             torque += [sym.rnea(states[j][0], states[j][1], u) for j in range(S + 1)]
         blocks = [*continuity, *path, *middle, *clear, *torque]
         full = ca.vertcat(*blocks) / ca.DM(problem.row_scale)

@@ -83,7 +83,7 @@ def test_the_peer_nlp_has_the_projects_constraint_rows(scenario, name):
     problem = composition_problem(
         composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
     )
-    assert problem.collision is not None and len(problem.collision.obstacles) == len(scenario.task.obstacles)
+    assert problem.collision is not None and problem.collision.obstacles == scenario.task.collision_obstacles
     nlp = PeerNLP.build(problem).functions()
     y0 = problem.initial_guess()
     rng = np.random.default_rng(11)

@@ -42,6 +42,7 @@ from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InputError, shorten
 from .execution import Engine, make_engine
 from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
+from .obstacles import obstacle_label
 from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
 from .urdf_assembly import assembly_reach
@@ -229,7 +230,8 @@ def _collision_check(collision: CollisionModel, q: np.ndarray, label: str) -> _C
     i, j = np.unravel_index(int(np.argmin(distances.distance)), distances.distance.shape)
     clearance = float(distances.distance[i, j])
     name = collision.robot.primitives[i].name
-    message = f"collision: {name} {-clearance:.3g} m inside task.obstacles[{collision.given_index[j]}] ({label})"
+    where = obstacle_label(collision.obstacles[j], collision.given_index[j])
+    message = f"collision: {name} {-clearance:.3g} m inside {where} ({label})"
     return _Check(clearance > 0.0, clearance, message)
 
 
@@ -340,7 +342,7 @@ def _reach_and_model(
     if catalog.general and not _inside_workspace(cascade, lambda: workspace_box(robot), targets, settings):
         return
     t0 = time.perf_counter()
-    cascade.collision = functools.cache(lambda: CollisionModel(robot, task.obstacles))
+    cascade.collision = functools.cache(lambda: CollisionModel(robot, task.collision_obstacles))
     cascade.seeds = ik_seeds(robot, settings.seeds)
     cascade.clock.time("model", t0)
 

@@ -324,14 +324,14 @@ def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
 def winner_approach(result: CandidateResult, scenario: Scenario, samples: int = 401) -> Approach | None:
     """Where an optimal result's plan comes closest to an obstacle, on ``samples`` instants of its
     trajectory (:func:`~modular_robots.collision.closest_approach`); None without obstacles."""
-    if not scenario.task.obstacles:
+    if not scenario.task.collision_obstacles:
         return None
     trajectory = result.trajectory
     assert trajectory is not None  # an optimal result carries its plan
     composition = Composition.from_name(result.composition or result.name, scenario.catalog)
     robot = robot_model(composition, scenario.catalog, scenario.task.payload)
     times = np.linspace(0.0, float(trajectory.t[-1]), samples)
-    collision = CollisionModel(robot, scenario.task.obstacles)
+    collision = CollisionModel(robot, scenario.task.collision_obstacles)
     return closest_approach(collision, times, trajectory.at(times)[0])
 
 

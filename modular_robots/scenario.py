@@ -12,7 +12,7 @@ from .catalog import Catalog, catalog_from_fields, load_catalog
 from .costs import COSTS
 from .exceptions import InputError, ScenarioError, shorten
 from .execution import CONNECT_TIMEOUT, ENGINES, ExecutionSettings, address_problem
-from .obstacles import Obstacle, SphereObstacle, obstacle_from_fields
+from .obstacles import FloorObstacle, Obstacle, SphereObstacle, obstacle_from_fields
 
 __all__ = [
     "Obstacle",
@@ -43,12 +43,15 @@ MAX_ITERATIONS = 100_000
 #: with a plan that eats the margins and fails verification (which checks defects to 1e-3).
 MAX_TOLERANCE = 1e-2
 _LOOSE = "looser, the solver stops before the plan keeps its constraints and margins"
+#: The highest floor [m]: a floor is the plane the robot stands on, near its base.
+MAX_FLOOR = 10.0
 
 
 @dataclass(frozen=True)
 class Task:
     """Carry ``payload`` [kg] from tool position ``start`` to ``goal`` [m, base frame], at rest at
-    both ends, clear of ``obstacles``, minimising ``cost`` (``time`` or ``effort``)."""
+    both ends, clear of ``obstacles`` and above the ``floor`` (``z`` [m] in the base frame; None:
+    no floor), minimising ``cost`` (``time`` or ``effort``)."""
 
     payload: float
     start: tuple[float, float, float]
@@ -56,6 +59,13 @@ class Task:
     obstacles: tuple[Obstacle, ...] = ()
     cost: str = "time"
     self_collision: bool = False
+    floor: float | None = 0.0
+
+    @property
+    def collision_obstacles(self) -> tuple[Obstacle, ...]:
+        """Everything the robot is kept clear of: the ``obstacles``, then the floor if there is one
+        (:class:`~modular_robots.obstacles.FloorObstacle`)."""
+        return self.obstacles + (() if self.floor is None else (FloorObstacle(self.floor),))
 
 
 @dataclass(frozen=True)
@@ -192,6 +202,7 @@ def _read_task(f: Fields) -> Task:
             if obstacle.contains(point):
                 raise item.fail(obstacle.kind, f"the obstacle contains the {label} position {list(point)}")
         obstacles.append(obstacle)
+    floor = _read_floor(f, start, goal)
     cost = f.string("cost", default="time", choices=tuple(COSTS))
     self_collision = f.boolean("self_collision", default=False)
     if self_collision:
@@ -200,7 +211,23 @@ def _read_task(f: Fields) -> Task:
             "self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false",
         )
     f.done()
-    return Task(payload, start, goal, tuple(obstacles), cost, self_collision)
+    return Task(payload, start, goal, tuple(obstacles), cost, self_collision, floor)
+
+
+def _read_floor(f: Fields, start: tuple[float, ...], goal: tuple[float, ...]) -> float | None:
+    """``task.floor``: a height [m] (default 0, the base's mounting plane) or ``none``."""
+    value = f.raw("floor", 0.0)
+    if value is None or value == "none":
+        return None
+    height = f.number("floor", default=0.0, maximum=MAX_FLOOR)
+    for label, point in (("start", start), ("goal", goal)):
+        f.check(
+            "floor",
+            point[2] > height,
+            f"the {label} position {list(point)} is not above the floor at z = {height:g} m; expected a floor "
+            f"below the task (or none)",
+        )
+    return height
 
 
 _DENSE = "the solver's matrices are dense: memory and time grow with the square of the problem's size"

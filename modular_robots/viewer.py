@@ -23,6 +23,7 @@ import yourdfpy
 
 from .exceptions import InputError, shorten
 from .folder import ResultsFolder, atomic_write
+from .obstacles import obstacle_label
 from .plan.candidate import CandidateStatus
 from .plan.document import drawn_task, winner_plan_files
 from .plan.records import CandidateRecord, ResultDocument
@@ -176,7 +177,7 @@ def panel(document: ResultDocument) -> str:
             (
                 "closest approach",
                 f"{approach.clearance * 1000:.1f} mm at t = {approach.t:.3f} s, "
-                f"{approach.primitive} to task.obstacles[{approach.obstacle}]",
+                f"{approach.primitive} to {_obstacle_label(document, approach.obstacle)}",
             )
         )
     if w.verification:
@@ -192,6 +193,11 @@ def panel(document: ResultDocument) -> str:
         f"({e(w.boundary_pair)} boundary pair)</p><table class='figures'>{figures}</table>"
         f"<p class='sub'>{_legend()}</p><h2>Candidates</h2>{ranking}"
     )
+
+
+def _obstacle_label(document: ResultDocument, index: int) -> str:
+    obstacles = document.task.obstacles
+    return obstacle_label(obstacles[index], index) if 0 <= index < len(obstacles) else f"task.obstacles[{index}]"
 
 
 def _figure(value: float | int | None, scale: float, spec: str) -> str:

@@ -230,7 +230,7 @@ def test_a_run_among_a_column_and_a_floor_verifies_and_its_page_draws_them(tmp_p
     winner = result.winner
     assert winner is not None and winner.verification.passed and winner.verification.min_clearance >= 0.0
     document = json.loads((out / "result.json").read_text())
-    assert [next(iter(o)) for o in document["task"]["obstacles"]] == ["capsule", "plane"]
+    assert [next(iter(o)) for o in document["task"]["obstacles"]] == ["capsule", "plane", "floor"]
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         return

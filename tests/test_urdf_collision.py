@@ -210,7 +210,7 @@ def test_the_overlap_that_aborts_fcl_signed_distance_is_measured(tmp_path):
                         [-0.60079138045083513298, 3.9954836164102923278e-16, -0.79940585260303154147]])
         at = np.array([-1.0063523648541286004, 2.2056442426030700155, 0.41290128416497140496])
         model._robot_objects[port].setTransform(fcl.Transform(rot, at))
-        d, on_robot, on_obstacle = model._pair_distance(port, 0, at, rot)
+        d, on_robot, on_obstacle, _ = model._pair_distance(port, 0, at, rot)
         print(float(d), float(np.linalg.norm(at - center) - 0.45), float(np.linalg.norm(on_robot - on_obstacle)))
     """)
     )

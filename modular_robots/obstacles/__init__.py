@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 from .base import Obstacle, Witness
 from .box import BoxObstacle
 from .capsule import CapsuleObstacle
+from .floor import FloorObstacle
 from .plane import PlaneObstacle
 from .sphere import SphereObstacle
 
@@ -25,10 +26,12 @@ __all__ = [
     "BoxObstacle",
     "CapsuleObstacle",
     "PlaneObstacle",
+    "FloorObstacle",
     "SHAPES",
     "obstacle_from_fields",
     "obstacle_from_json",
     "obstacle_to_json",
+    "obstacle_label",
 ]
 
 #: Every shape, by its key in a scenario's ``task.obstacles`` and in ``result.json``.
@@ -55,13 +58,20 @@ def obstacle_from_json(data: Any) -> Obstacle:
     radius}``, written before shapes had keys, is a sphere). ``ValueError`` on bad data."""
     if isinstance(data, dict) and set(data) == {"center", "radius"}:
         return SphereObstacle.from_json(data)
-    if not isinstance(data, dict) or len(data) != 1 or next(iter(data)) not in SHAPES:
-        raise ValueError(f"expected a mapping of one shape key (one of: {', '.join(SHAPES)}), got {data!r:.60}")
+    kinds: dict[str, type[Obstacle]] = {**SHAPES, FloorObstacle.kind: FloorObstacle}  # floor: task.floor
+    if not isinstance(data, dict) or len(data) != 1 or next(iter(data)) not in kinds:
+        raise ValueError(f"expected a mapping of one shape key (one of: {', '.join(kinds)}), got {data!r:.60}")
     kind, fields = next(iter(data.items()))
     try:
-        return SHAPES[kind].from_json(fields)
+        return kinds[kind].from_json(fields)
     except ValueError as e:
         raise ValueError(f"{kind}.{e}") from None
+
+
+def obstacle_label(obstacle: Obstacle, index: int) -> str:
+    """How messages name the obstacle at ``index`` of a task's obstacles: ``task.obstacles[i]``, or
+    ``task.floor`` (the floor follows the scenario's obstacles)."""
+    return "task.floor" if isinstance(obstacle, FloorObstacle) else f"task.obstacles[{index}]"
 
 
 def obstacle_to_json(obstacle: Obstacle) -> dict[str, Any]:

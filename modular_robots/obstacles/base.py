@@ -44,6 +44,9 @@ class Obstacle(Protocol):
     #: distance for some shapes: a half-space crashes the process). False: FCL
     #: measures apart pairs and :meth:`signed_distance` only overlapping ones.
     closed_form: ClassVar[bool]
+    #: True: only the robot's primitives that a joint moves are kept clear of it (the floor, on
+    #: which the base and what is rigidly mounted on it stand).
+    moving_only: ClassVar[bool]
 
     @classmethod
     def from_fields(cls, f: Fields) -> Obstacle:

@@ -38,6 +38,7 @@ class BoxObstacle:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
     kind: ClassVar[str] = "box"
     closed_form: ClassVar[bool] = True
+    moving_only: ClassVar[bool] = False
 
     def __post_init__(self) -> None:  # any sequences of numbers in, a hashable value out
         for name in ("center", "size", "rpy"):

@@ -32,6 +32,7 @@ class CapsuleObstacle:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
     kind: ClassVar[str] = "capsule"
     closed_form: ClassVar[bool] = True
+    moving_only: ClassVar[bool] = False
 
     def __post_init__(self) -> None:  # any sequences of numbers in, a hashable value out
         object.__setattr__(self, "center", tuple(float(c) for c in self.center))

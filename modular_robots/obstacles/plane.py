@@ -34,6 +34,7 @@ class PlaneObstacle:
     normal: tuple[float, float, float]
     kind: ClassVar[str] = "plane"
     closed_form: ClassVar[bool] = True
+    moving_only: ClassVar[bool] = False
 
     def __post_init__(self) -> None:  # any sequences of numbers in; the normal made unit
         n = np.asarray([float(c) for c in self.normal])

@@ -31,6 +31,7 @@ class SphereObstacle:
     radius: float
     kind: ClassVar[str] = "sphere"
     closed_form: ClassVar[bool] = False  # FCL's sphere distances are exact: its results are kept
+    moving_only: ClassVar[bool] = False
 
     def __post_init__(self) -> None:  # any sequence of three numbers in, a hashable value out
         x, y, z = (float(c) for c in self.center)

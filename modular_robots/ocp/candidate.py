@@ -320,7 +320,7 @@ def composition_problem(
     """The shooting problem of ``composition`` for ``task``, from rest at ``q_start`` to rest at
     ``q_goal`` (step B's boundary configurations, :class:`CandidateSpec`)."""
     robot = robot_model(composition, catalog, task.payload)
-    return ShootingProblem(robot, q_start, q_goal, task.obstacles, task.cost, settings)
+    return ShootingProblem(robot, q_start, q_goal, task.collision_obstacles, task.cost, settings)
 
 
 def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:

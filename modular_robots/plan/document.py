@@ -92,7 +92,7 @@ def task_json(task: Task) -> dict:
         "payload": task.payload,
         "start": list(task.start),
         "goal": list(task.goal),
-        "obstacles": [obstacle_to_json(o) for o in task.obstacles],
+        "obstacles": [obstacle_to_json(o) for o in task.collision_obstacles],
         "cost": task.cost,
     }
 
