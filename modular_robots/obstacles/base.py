@@ -9,7 +9,7 @@ this protocol.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
     from .._yamlio import Fields
 
-__all__ = ["Obstacle", "Witness"]
+__all__ = ["Obstacle", "Witness", "members"]
 
 #: Signed distance [m], the witness points on the robot and on the obstacle (base frame), and the
 #: distance's gradient with respect to a translation of the robot's witness point (a unit vector,
@@ -122,3 +122,14 @@ class Obstacle(Protocol):
         vocabulary (``type`` sphere, capsule, box, cylinder or mesh, their sizes, and ``origin``,
         a column-major 4x4 pose in the base frame)."""
         ...
+
+
+S = TypeVar("S")
+
+
+def members(obstacles: Sequence[Obstacle], shape: type[S]) -> list[S]:
+    """``obstacles`` as the shape class's own (its batch methods take no other): ``TypeError``
+    when one is not of ``shape``."""
+    if not all(isinstance(o, shape) for o in obstacles):
+        raise TypeError(f"a batch of {shape.__name__} holds only {shape.__name__}s")
+    return [o for o in obstacles if isinstance(o, shape)]

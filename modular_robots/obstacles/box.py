@@ -7,13 +7,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, cast
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from ._geometry import pose_columns, rpy_matrix
 from ._json import json_vector
-from .base import Obstacle, Witness
+from .base import Obstacle, Witness, members
 
 if TYPE_CHECKING:
     import fcl
@@ -83,9 +83,7 @@ class BoxObstacle:
     @classmethod
     def batch(cls, obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centres ``(O, 3)`` [m], rotations ``(O, 3, 3)`` and half sizes ``(O, 3)`` [m]."""
-        if not all(isinstance(o, BoxObstacle) for o in obstacles):
-            raise TypeError("a batch of BoxObstacle holds boxes only")
-        boxes = cast("Sequence[BoxObstacle]", obstacles)
+        boxes = members(obstacles, BoxObstacle)
         centers = np.array([o.center for o in boxes], dtype=float).reshape(-1, 3)
         rotations = np.array([rpy_matrix(o.rpy) for o in boxes], dtype=float).reshape(-1, 3, 3)
         return centers, rotations, 0.5 * np.array([o.size for o in boxes], dtype=float).reshape(-1, 3)

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, cast
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from ._geometry import pose_columns, rpy_matrix, segment_parameters
 from ._json import json_number, json_vector
-from .base import Obstacle, Witness
+from .base import Obstacle, Witness, members
 
 if TYPE_CHECKING:
     import fcl
@@ -95,9 +95,7 @@ class CapsuleObstacle:
     @classmethod
     def batch(cls, obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Segment starts and directions ``(O, 3)`` [m] and radii ``(O,)`` [m]."""
-        if not all(isinstance(o, CapsuleObstacle) for o in obstacles):
-            raise TypeError("a batch of CapsuleObstacle holds capsules only")
-        capsules = cast("Sequence[CapsuleObstacle]", obstacles)
+        capsules = members(obstacles, CapsuleObstacle)
         ends = [o._ends() for o in capsules]
         starts = np.array([e[0] for e in ends], dtype=float).reshape(-1, 3)
         directions = np.array([e[1] for e in ends], dtype=float).reshape(-1, 3)

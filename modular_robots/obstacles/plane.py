@@ -6,12 +6,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, cast
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from ._json import json_vector
-from .base import Obstacle, Witness
+from .base import Obstacle, Witness, members
 
 if TYPE_CHECKING:
     import fcl
@@ -83,9 +83,7 @@ class PlaneObstacle:
     @classmethod
     def batch(cls, obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, np.ndarray]:
         """Unit normals ``(O, 3)`` and offsets ``(O,)`` [m]."""
-        if not all(isinstance(o, PlaneObstacle) for o in obstacles):
-            raise TypeError("a batch of PlaneObstacle holds planes only")
-        planes = cast("Sequence[PlaneObstacle]", obstacles)
+        planes = members(obstacles, PlaneObstacle)
         normals = np.array([o.normal for o in planes], dtype=float).reshape(-1, 3)
         return normals, np.array([o.offset for o in planes], dtype=float)
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, cast
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from ._json import json_number, json_vector
-from .base import Obstacle, Witness
+from .base import Obstacle, Witness, members
 
 if TYPE_CHECKING:
     import fcl
@@ -75,9 +75,7 @@ class SphereObstacle:
     @classmethod
     def batch(cls, obstacles: Sequence[Obstacle]) -> SphereBatch:
         """The centres ``(O, 3)`` and radii ``(O,)`` [m] of ``obstacles`` (spheres only)."""
-        if not all(isinstance(o, SphereObstacle) for o in obstacles):
-            raise TypeError("a batch of SphereObstacle holds spheres only")
-        spheres = cast("Sequence[SphereObstacle]", obstacles)
+        spheres = members(obstacles, SphereObstacle)
         centers = np.array([o.center for o in spheres], dtype=float).reshape(-1, 3)
         return centers, np.array([o.radius for o in spheres], dtype=float)
 
