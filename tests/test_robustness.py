@@ -37,7 +37,7 @@ from modular_robots.recorder import previous_files
 from modular_robots.robot import robot_model
 
 from .helpers.paths import ROOT
-from .helpers.runs import start_run
+from .helpers.runs import signal_stopped, start_run
 
 SMALL = ROOT / "tests" / "data" / "small.yaml"
 SMALL_TEXT = SMALL.read_text()
@@ -76,18 +76,32 @@ def _processes_of(out: Path) -> list[int]:
     return found
 
 
-def _run_until_step_c(out: Path, jobs: int, **popen) -> subprocess.Popen:
-    """``run`` of the small scenario into ``out``, once its step C has started."""
-    return start_run(out, ["--jobs", str(jobs)], lambda document: "candidates" in document["counts"], **popen)
+def _run_stopped_in_step_c(out: Path, jobs: int, **popen) -> subprocess.Popen:
+    """``run`` of the small scenario into ``out``, stopped (``SIGSTOP``; its whole group if it
+    leads one) once its step C has started, its result.json showing it still running: all of
+    step C is still to do, and a signal sent now (:func:`signal_stopped`) lands in it, however
+    busy the machine."""
+    return start_run(
+        out, ["--jobs", str(jobs)], lambda document: "candidates" in document["counts"], stop=True, **popen
+    )
+
+
+def _no_processes_of(out: Path) -> bool:
+    """Whether no process names ``out`` (the run and its workers have ended), waiting for the
+    workers the run told to end to be gone (on a busy machine that can take a moment)."""
+    deadline = time.monotonic() + 30
+    while _processes_of(out) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return _processes_of(out) == []
 
 
 # -- 1. every termination is recorded ------------------------------------------------------------
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT])
 def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, signum):
     out = tmp_path / "out"
-    child = _run_until_step_c(out, jobs=2)
-    child.send_signal(signum)
-    _, stderr = child.communicate(timeout=60)
+    child = _run_stopped_in_step_c(out, jobs=2)
+    signal_stopped(child, signum)
+    _, stderr = child.communicate(timeout=300)
     name = signal.Signals(signum).name
     assert child.returncode == 128 + signum, stderr
     assert stderr.rstrip().splitlines()[-1] == f"Error: terminated by {name}"
@@ -96,8 +110,7 @@ def test_a_terminating_signal_mid_run_is_recorded_as_an_interruption(tmp_path, s
     assert document["message"].startswith(f"terminated by {name}")
     assert document["counts"]["candidates"] == len(document["candidates"]) == 6
     assert _leftovers(out) == []  # no lock, no temporary file
-    time.sleep(0.2)
-    assert _processes_of(out) == []  # no worker outlives the run
+    assert _no_processes_of(out)  # no worker outlives the run
 
 
 @pytest.mark.parametrize(
@@ -109,16 +122,16 @@ def test_signals_in_quick_succession_end_the_run_as_the_first_one_says(tmp_path,
     """A second Ctrl-C, or a supervisor repeating its signal, must not interrupt the record of the
     ending: every signal after the first is ignored, and the first names the ending everywhere."""
     out = tmp_path / "out"
-    child = _run_until_step_c(out, jobs, start_new_session=group)
+    child = _run_stopped_in_step_c(out, jobs, start_new_session=group)
     send = (lambda signum: os.killpg(child.pid, signum)) if group else child.send_signal
-    send(first)
+    signal_stopped(child, first)
     _wait_until_delivered(child.pid, first)  # pending together, the kernel delivers the lower number first
     deadline = time.monotonic() + 1.5
     while child.poll() is None and time.monotonic() < deadline:
         with contextlib.suppress(ProcessLookupError):
             send(then)
         time.sleep(0.002)
-    _, stderr = child.communicate(timeout=60)
+    _, stderr = child.communicate(timeout=300)
     said = "interrupted by the user" if first == signal.SIGINT else f"terminated by {signal.Signals(first).name}"
     assert child.returncode == 128 + first, stderr
     assert "Traceback" not in stderr and stderr.rstrip().splitlines()[-1] == f"Error: {said}"
@@ -144,7 +157,7 @@ def test_later_signals_wait_for_the_ending_unless_its_exception_was_swallowed():
 
 def _wait_until_delivered(pid: int, signum: int) -> None:
     """Wait until the process ``pid`` no longer has ``signum`` pending (its handler has it)."""
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 120  # a safety net: on a busy machine it can take a while
     while time.monotonic() < deadline:
         with contextlib.suppress(OSError, StopIteration):
             status = Path(f"/proc/{pid}/status").read_text().splitlines()

@@ -364,7 +364,13 @@ def test_improv_pick_step_b_keeps_the_assemblies_that_reach_and_hold():
     no_floor, floor = summaries[None], summaries[0.0]
     assert len(no_floor.survivors) == 17 and len(floor.survivors) == 14
     # each test removes its own: a looser reach bound would leave its 5 to inverse kinematics
-    assert no_floor.removed == {"reach": 5, "workspace": 2, "inverse kinematics": 24, "static torque": 0, "collision": 0}
+    assert no_floor.removed == {
+        "reach": 5,
+        "workspace": 2,
+        "inverse kinematics": 24,
+        "static torque": 0,
+        "collision": 0,
+    }
     assert floor.removed == {**no_floor.removed, "collision": 3}
     assert {v.composition.name for v in floor.survivors} < {v.composition.name for v in no_floor.survivors}
     assert max(v.figures["torque_ratio"] for v in floor.survivors) < 0.5

@@ -8,12 +8,13 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from click.testing import CliRunner
 
 from modular_robots.cli import main
+
+from .helpers.runs import hold, signal_stopped, wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ROOT / "tests" / "data" / "small.yaml"
@@ -47,13 +48,17 @@ def test_an_interrupted_filter_resumes_to_the_output_of_an_uninterrupted_one(tmp
 
     verdicts = tmp_path / "cut.jsonl"
     child = subprocess.Popen([*CLI, "filter", *common, "--verdicts", str(verdicts)], cwd=ROOT, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and child.poll() is None:
-        if verdicts.exists() and verdicts.read_bytes().count(b"\n") > 300:
-            break
-        time.sleep(0.02)
-    child.send_signal(signal.SIGINT)
-    child.communicate(timeout=60)
+
+    def lines() -> int:  # the header and a line per verdict
+        return verdicts.read_bytes().count(b"\n")
+
+    # Ctrl-C once 300 verdicts are written, the filter stopped (SIGSTOP) still well short of its
+    # 1500 (each line is flushed: the file is what it has done): the signal lands in step B,
+    # however busy the machine, instead of after a filter that finished while the test waited.
+    wait_for(child, lambda: lines() > 300, "300 verdicts are written")
+    hold(child, lambda: lines() - 1 < 1400, "the filter is still in step B, 100 verdicts or more to go")
+    signal_stopped(child, signal.SIGINT)
+    child.communicate(timeout=300)
     assert child.returncode == 130
     done = verdicts.read_bytes().count(b"\n") - 1
     assert 300 <= done < 1500  # it was interrupted part-way
