@@ -619,16 +619,16 @@ def _worker(parent, conn, factory, context, specs, names) -> None:
     executor = InProcessExecutor(factory, context, specs, names)
     try:
         while True:
-            command, names = conn.recv()
+            command, names, number = conn.recv()
             if command not in ("advance", "stop"):
                 break
             try:
                 reply = executor.advance(names) if command == "advance" else executor.stop(names)
-                conn.send(reply)
+                conn.send((number, reply))
             except (OSError, EOFError):  # the parent has gone
                 raise
             except Exception as exc:  # the parent raises it, as it would have with jobs = 1
-                conn.send(_Failed.of(exc))
+                conn.send((number, _Failed.of(exc)))
     except (EOFError, OSError, KeyboardInterrupt):
         pass
     finally:
@@ -658,7 +658,14 @@ class _Failed:
 class ProcessExecutor:
     """Worker processes that each host a fixed share of the jobs (round robin) and advance them on
     command, so the lockstep, and every decision taken on it, does not depend on the number of
-    workers."""
+    workers.
+
+    Every command carries a number that its reply echoes, and the parent reads a worker's replies
+    until the one of the command it waits for: a reply left unread because a signal ended the
+    run between a command's send and its receive is skipped by the next command (the run's
+    ending stops the jobs), whatever instant the signal chose. No bookkeeping outside the call's
+    own variables says which replies are due, so there is none for a signal to cut in half.
+    """
 
     def __init__(
         self, factory: Callable[[Any, Any], Any], context: Any, specs: Sequence[Any], names: Sequence[str], jobs: int
@@ -669,7 +676,7 @@ class ProcessExecutor:
         self._owner = {name: i % jobs for i, name in enumerate(self._names)}
         self._conns: list = []
         self._procs: list = []
-        self._awaiting: set[int] = set()
+        self._number = 0  # of the last command sent
         try:
             for w in range(jobs):
                 mine = [i for i, n in enumerate(self._names) if self._owner[n] == w]
@@ -696,25 +703,21 @@ class ProcessExecutor:
             by_worker.setdefault(self._owner[name], []).append(name)
         out = {}
         failure: BaseException | None = None
+        self._number += 1
+        number = self._number
+        sent = []
         for w, mine in by_worker.items():
             try:
-                if w in self._awaiting:  # a reply left unread by an interruption
-                    self._conns[w].recv()
-                    self._awaiting.discard(w)
-                self._conns[w].send((command, mine))
-                self._awaiting.add(w)
+                self._conns[w].send((command, mine, number))
+                sent.append(w)
             except (EOFError, OSError) as exc:
                 if not tolerate_dead:
                     raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
                 out.update(dict.fromkeys(mine))
-        for w in by_worker:
-            if w not in self._awaiting:
-                continue
+        for w in sent:
             try:
-                reply = self._conns[w].recv()
-                self._awaiting.discard(w)
+                reply = self._reply(w, number)
             except (EOFError, OSError) as exc:
-                self._awaiting.discard(w)
                 if not tolerate_dead:
                     raise ModularRobotsError(f"worker process {w} died ({exc!r})") from exc
                 out.update(dict.fromkeys(by_worker[w]))
@@ -727,6 +730,14 @@ class ProcessExecutor:
             raise failure
         return out
 
+    def _reply(self, w: int, number: int) -> Any:
+        """Worker ``w``'s reply to command ``number``, past replies to earlier commands that an
+        interruption left unread."""
+        while True:
+            echoed, reply = self._conns[w].recv()
+            if echoed == number:
+                return reply
+
     def advance(self, names):
         return self._command("advance", names)
 
@@ -736,7 +747,7 @@ class ProcessExecutor:
     def shutdown(self) -> None:
         for conn in self._conns:
             with contextlib.suppress(BrokenPipeError, OSError):
-                conn.send(("exit", []))
+                conn.send(("exit", [], 0))
         for proc in self._procs:
             proc.join(timeout=10)
         _stop([proc for proc in self._procs if proc.is_alive()])
