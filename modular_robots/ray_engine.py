@@ -205,7 +205,10 @@ def _no_answer(host: str, port: int, timeout: float) -> str | None:
     deadline = time.monotonic() + timeout
     header = b""
     try:
-        with socket.create_connection((host, port), timeout=timeout) as connection:
+        addresses = _resolved(host, port, timeout)
+        if isinstance(addresses, str):
+            return addresses
+        with _connected(addresses, deadline) as connection:
             connection.sendall(_HTTP2_PREFACE)
             while len(header) < 9:
                 connection.settimeout(max(0.001, deadline - time.monotonic()))
@@ -222,6 +225,44 @@ def _no_answer(host: str, port: int, timeout: float) -> str | None:
     if len(header) < 9 or header[3] != 4:
         return "what answers there is not a Ray cluster (not a gRPC server)"
     return None
+
+
+def _connected(addresses: list, deadline: float) -> socket.socket:
+    """A socket connected to the first of ``addresses`` (``getaddrinfo``'s) that accepts before
+    ``deadline`` (``time.monotonic``), as ``socket.create_connection`` tries them; its last error
+    otherwise."""
+    error: OSError = TimeoutError()
+    for family, kind, protocol, _, where in addresses:
+        connection = socket.socket(family, kind, protocol)
+        try:
+            connection.settimeout(max(0.001, deadline - time.monotonic()))
+            connection.connect(where)
+            return connection
+        except OSError as exc:
+            connection.close()
+            error = exc
+    raise error
+
+
+def _resolved(host: str, port: int, timeout: float) -> list | str:
+    """``host``'s addresses (``socket.getaddrinfo``'s, TCP), or why there are none within
+    ``timeout`` seconds: a name lookup has no timeout of its own (a resolver that never answers
+    holds it for as long as the system's retries last), so it runs in a daemon thread that is
+    left behind if it overruns."""
+    found: list = []
+
+    def lookup() -> None:
+        try:
+            found.append(socket.getaddrinfo(host, port, type=socket.SOCK_STREAM))
+        except OSError as exc:
+            found.append(f"the host name {host!r} cannot be resolved ({exc.strerror or exc})")
+
+    thread = threading.Thread(target=lookup, name="ray-address-lookup", daemon=True)
+    thread.start()
+    thread.join(timeout)
+    if not found:
+        return f"the host name {host!r} was not resolved within {timeout:g} s (execution.connect_timeout)"
+    return found[0] or f"the host name {host!r} has no address"
 
 
 def start_local(cpus: int) -> None:

@@ -27,9 +27,12 @@ from modular_robots import ray_engine
 from modular_robots.cli import main
 from modular_robots.exceptions import EngineError, ModularRobotsError, ScenarioError, Terminated
 from modular_robots.execution import ExecutionSettings, ProcessEngine, ProcessExecutor, make_engine
+from modular_robots.ocp import solver as solver_module
+from modular_robots.ocp.solver import ShootingSolver
 from modular_robots.scenario import load_scenario
 
 from .helpers.paths import CLI, ROOT, SMALL
+from .helpers.problems import paper_problem
 
 needs_ray = pytest.mark.skipif(ray_engine.ray is None, reason="Ray is not installed")
 
@@ -208,6 +211,31 @@ def test_an_address_that_accepts_and_never_answers_is_given_up_after_the_timeout
     message = _connect_error(silent, timeout=0.5)
     assert message == (
         f"cannot connect to the Ray cluster at '{silent}': no answer within 0.5 s (execution.connect_timeout) {HINT}"
+    )
+
+
+@needs_ray
+def test_a_host_name_whose_lookup_never_answers_is_given_up_after_the_timeout(monkeypatch):
+    """A resolver that does not answer holds ``getaddrinfo`` for as long as the system's retries
+    last (no timeout of its own): the connection time bounds the lookup too."""
+    released = threading.Event()
+    looked_up = []
+
+    def hanging_lookup(host, *args, **kwargs):
+        looked_up.append(host)
+        released.wait(30)
+        raise socket.gaierror(-3, "Temporary failure in name resolution")
+
+    monkeypatch.setattr(socket, "getaddrinfo", hanging_lookup)
+    started = time.monotonic()
+    try:
+        message = _connect_error("ray-head.invalid:6379", timeout=0.5)
+    finally:
+        released.set()
+    assert looked_up == ["ray-head.invalid"] and time.monotonic() - started < 10
+    assert message == (
+        "cannot connect to the Ray cluster at 'ray-head.invalid:6379': the host name 'ray-head.invalid' was not "
+        f"resolved within 0.5 s (execution.connect_timeout) {HINT}"
     )
 
 
@@ -401,6 +429,26 @@ def test_a_worker_of_step_b_that_dies_ends_the_stream_in_one_line():
         list(ProcessEngine(2).map_chunks(_die, None, range(64)))
     assert str(error.value).startswith("a worker process died (A process in the process pool was terminated abruptly")
     assert multiprocessing.active_children() == []
+
+
+def test_a_solver_that_cannot_start_its_thread_raises_that_and_closes_quietly(monkeypatch):
+    """Under ``ulimit -v`` the solver's thread may not start: its error reaches the caller, and
+    ``close()`` (which the run's ending calls) neither waits nor replaces it with its own (it
+    raised "cannot join thread before it is started")."""
+
+    class NoThread(threading.Thread):
+        def start(self):
+            raise RuntimeError("can't start new thread")
+
+    monkeypatch.setattr(solver_module.threading, "Thread", NoThread)
+    solver = ShootingSolver(paper_problem())
+    with pytest.raises(RuntimeError, match=r"^can't start new thread$"):
+        next(solver.iterate())
+    started = time.monotonic()
+    solver.close()
+    assert time.monotonic() - started < 0.5
+    assert solver.outcome is not None and solver.outcome.status == "failed"
+    assert solver.outcome.reason == "cannot start the solver's thread: can't start new thread"
 
 
 class _Raising:

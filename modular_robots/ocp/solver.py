@@ -169,8 +169,13 @@ class ShootingSolver:
         if self._started:
             raise SolverReuseError("a ShootingSolver iterates once; create a new one to solve again")
         self._started = True
-        self._thread = threading.Thread(target=self._run, name="trust-constr", daemon=True)
-        self._thread.start()
+        thread = threading.Thread(target=self._run, name="trust-constr", daemon=True)
+        try:
+            thread.start()
+        except RuntimeError as exc:  # no memory for a thread (ulimit -v): the caller sees this error, not close()'s
+            self.outcome = self._outcome_without_result("failed", f"cannot start the solver's thread: {exc}")
+            raise
+        self._thread = thread
         try:
             while self.outcome is None:
                 message = self._receive()
