@@ -68,7 +68,7 @@ def test_a_registered_shape_is_read_from_a_scenario_and_round_trips_through_json
     scenario_path.write_text(text.replace("- sphere:", "- cone:", 1))
     with pytest.raises(
         ScenarioError,
-        match=r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: ball, box, capsule, plane, sphere\)",
+        match=r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: ball, box, capsule, cylinder, mesh, plane, sphere\)",
     ):
         load_scenario(scenario_path)
 

@@ -165,7 +165,7 @@ def test_the_scenario_reads_both_shapes_and_refuses_bad_ones(tmp_path):
         "    - plane: {point: [0, 0, -0.5], normal: [0, 0, 0]}\n": r"task\.obstacles\[0\]\.plane\.normal: expected a non-zero vector",
         "    - capsule: {center: [1.5, -1.3, 1.1], radius: 0.3, length: 0}\n": r"task\.obstacles\[0\]\.capsule\.length: expected a number > 0",
         "    - plane: {point: [0, 0, 0.5], normal: [0, 0, 1]}\n": r"task\.obstacles\[0\]\.plane: the obstacle contains the robot's base",
-        "    - cone: {center: [1, 1, 1]}\n": r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: box, capsule, plane, sphere\)",
+        "    - cone: {center: [1, 1, 1]}\n": r"task\.obstacles\[0\]\.cone: unknown key \(expected one of: box, capsule, cylinder, mesh, plane, sphere\)",
     }
     for obstacles, message in bad.items():
         with pytest.raises(ScenarioError, match=message):

@@ -411,7 +411,7 @@ def test_filter_checks_its_output_before_step_b(tmp_path):
         (
             "obstacles:\n    - sphere:",
             "obstacles:\n    - cone:",
-            "task.obstacles[0].cone: unknown key (expected one of: box, capsule, plane, sphere)",
+            "task.obstacles[0].cone: unknown key (expected one of: box, capsule, cylinder, mesh, plane, sphere)",
         ),
     ],
 )

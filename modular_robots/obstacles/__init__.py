@@ -12,7 +12,9 @@ from typing import TYPE_CHECKING, Any
 from .base import Obstacle, Witness
 from .box import BoxObstacle
 from .capsule import CapsuleObstacle
+from .cylinder import CylinderObstacle
 from .floor import FloorObstacle
+from .mesh import MeshObstacle
 from .plane import PlaneObstacle
 from .sphere import SphereObstacle
 
@@ -25,6 +27,8 @@ __all__ = [
     "SphereObstacle",
     "BoxObstacle",
     "CapsuleObstacle",
+    "CylinderObstacle",
+    "MeshObstacle",
     "PlaneObstacle",
     "FloorObstacle",
     "SHAPES",
@@ -36,7 +40,8 @@ __all__ = [
 
 #: Every shape, by its key in a scenario's ``task.obstacles`` and in ``result.json``.
 SHAPES: dict[str, type[Obstacle]] = {
-    cls.kind: cls for cls in (SphereObstacle, BoxObstacle, CapsuleObstacle, PlaneObstacle)
+    cls.kind: cls
+    for cls in (SphereObstacle, BoxObstacle, CapsuleObstacle, CylinderObstacle, MeshObstacle, PlaneObstacle)
 }
 
 
