@@ -187,6 +187,8 @@ class PeerNLP:
         inner = [z[1 + m * n : 1 + (m + 1) * n] for m in range(N - 1)]
         nodes = [ca.DM(problem.x_start), *inner, ca.DM(problem.x_goal)]
         controls = [z[problem._u0 + m * nv : problem._u0 + (m + 1) * nv] for m in range(N)]
+        if len(problem.self_collision_rows):
+            raise NotImplementedError("the peer does not write self-collision: build the problem without it")
         collision = problem.collision
         obstacles = collision.obstacles if collision else ()
         if any(not isinstance(o, SphereObstacle | PlaneObstacle) for o in obstacles):

@@ -8,6 +8,7 @@ Distances are signed: negative when the shapes overlap (penetration depth).
 from __future__ import annotations
 
 import itertools
+import math
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ import pinocchio as pin
 
 from .obstacles import Obstacle, Witness
 from .robot import RobotModel
+from .self_collision import SelfCollisionModel
 
 __all__ = [
     "CollisionModel",
@@ -64,7 +66,9 @@ class CollisionModel:
     :data:`CULL_DISTANCE` of the robot's reach (:func:`reach_bound`) take part: ``obstacles`` is
     those, in the given order, and every per-obstacle result is indexed by them; a distance to an
     obstacle left out is always larger than :data:`CULL_DISTANCE`. ``cull=False`` keeps them all
-    (for primitives placed by hand, out of the robot's reach).
+    (for primitives placed by hand, out of the robot's reach). ``self_collision=True`` also makes
+    :attr:`self_collision`, the robot's own checked pairs
+    (:class:`~modular_robots.self_collision.SelfCollisionModel`), for step B to measure alongside.
     """
 
     def __init__(
@@ -73,8 +77,10 @@ class CollisionModel:
         obstacles: Sequence[Obstacle],
         primitives: Sequence[int] | None = None,
         cull: bool = True,
+        self_collision: bool = False,
     ):
         self.robot = robot
+        self.self_collision = SelfCollisionModel(robot) if self_collision else None
         reach = reach_bound(robot) + CULL_DISTANCE if cull else np.inf
         near = [i for i, o in enumerate(obstacles) if _bounding_gap(o) <= reach]
         self.obstacles = tuple(obstacles[i] for i in near)
@@ -311,9 +317,35 @@ class CollisionModel:
         mid = poses[:, :, :3, 3] + self._mid_offsets[:, None] * rot[..., 2]
         return rot, mid, jac
 
+    def nearest(self, q: np.ndarray) -> tuple[float, int, int]:
+        """The smallest signed distance [m] between the robot and an obstacle at ``q``, and its
+        pair (primitive and obstacle indices; inf and -1, -1: no pair measured), as
+        :meth:`distances` measures it: the pairs are measured in the order of their shapes' lower
+        bounds, until the next bound is above the nearest distance found (a box or cylinder
+        measures a pair by a search along the link, so most of them are then never measured)."""
+        rot, mid, _ = self._placements(np.asarray(q, dtype=float)[None], jacobians=False)
+        rot, mid = rot[0], mid[0]
+        if not self.obstacles or not len(self._primitives):
+            return math.inf, -1, -1
+        lower, _ = self._bounds(rot[None], mid[None])
+        lower = lower[0]
+        best, pair = math.inf, (-1, -1)
+        placed = None
+        for flat in np.argsort(lower, axis=None, kind="stable").tolist():
+            i, j = divmod(flat, lower.shape[1])
+            if not lower[i, j] - _BOUND_SLACK < best:
+                break
+            if placed != i:
+                _place(self._robot_objects[i], rot[i], mid[i])
+                placed = i
+            distance = float(self._pair_distance(i, j, mid[i], rot[i])[0])
+            if distance < best:
+                best, pair = distance, (i, j)
+        return best, pair[0], pair[1]
+
     def min_distance(self, q: np.ndarray) -> float:
         """Smallest signed distance between the robot and any obstacle [m] (inf: no obstacle)."""
-        return self.distances(q).minimum
+        return self.nearest(q)[0]
 
     def path_clear(self, path: np.ndarray, clearance: float = PATH_CLEARANCE, samples: int = 24) -> bool:
         """True if the joint-space polyline ``path`` ``(K, nv)``, sampled ``samples`` times per

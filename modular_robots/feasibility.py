@@ -15,7 +15,9 @@ The cascade, in rank order (measured costs per call in ``benchmarks/results/feas
 2. ``inverse kinematics`` — position IK at the start and at the goal within joint limits, from
    several deterministic seeds (:mod:`modular_robots.ik`).
 3. ``static torque`` — gravity torque with the payload within every joint's effort limit.
-4. ``collision`` — every collision primitive clear of every obstacle (python-fcl).
+4. ``collision`` — every collision primitive clear of every obstacle (python-fcl) and, unless
+   ``task.self_collision`` is false, of the primitives of modules that are not its neighbours
+   (:mod:`~modular_robots.self_collision`, closed form).
 
 Tests 3 and 4 run on *every* distinct IK solution: a composition passes a target as soon as
 one of its solutions passes both. Torque runs before collision because it is about 200 times
@@ -43,6 +45,8 @@ from .exceptions import InputError, shorten
 from .execution import Engine, make_engine
 from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
 from .obstacles import obstacle_label
+from .orientation import Orientation
+from .pose_ik import solve_pose_ik_batch
 from .robot import RobotModel, robot_model
 from .scenario import Scenario, Task
 from .urdf_assembly import assembly_reach
@@ -85,7 +89,9 @@ INVERSE_KINEMATICS = FeasibilityTest(
 STATIC_TORQUE = FeasibilityTest(
     "static torque", 3, "torque_ratio", "gravity torque with the payload within effort limits"
 )
-COLLISION = FeasibilityTest("collision", 4, "clearance [m]", "every primitive clear of every obstacle")
+COLLISION = FeasibilityTest(
+    "collision", 4, "clearance [m]", "every primitive clear of every obstacle and of the robot's other modules"
+)
 
 TESTS: tuple[FeasibilityTest, ...] = (REACH, WORKSPACE, INVERSE_KINEMATICS, STATIC_TORQUE, COLLISION)
 """The cascade's tests, in rank order (cheapest first)."""
@@ -224,15 +230,21 @@ def _torque_check(robot: RobotModel, q: np.ndarray, label: str) -> _Check:
 
 
 def _collision_check(collision: CollisionModel, q: np.ndarray, label: str) -> _Check:
-    distances = collision.distances(q)
-    if not distances.distance.size:
-        return _Check(True, math.inf, "")
-    i, j = np.unravel_index(int(np.argmin(distances.distance)), distances.distance.shape)
-    clearance = float(distances.distance[i, j])
-    name = collision.robot.primitives[i].name
-    where = obstacle_label(collision.obstacles[j], collision.given_index[j])
-    message = f"collision: {name} {-clearance:.3g} m inside {where} ({label})"
-    return _Check(clearance > 0.0, clearance, message)
+    """The obstacles' check, unless the robot's own (if on) fails worse: the figure of a
+    configuration clear of itself is its obstacle clearance."""
+    checks = [_Check(True, math.inf, "")]
+    clearance, i, j = collision.nearest(q)
+    if i >= 0:
+        name = collision.robot.primitives[collision.primitive_indices[i]].name
+        where = obstacle_label(collision.obstacles[j], collision.given_index[j])
+        message = f"collision: {name} {-clearance:.3g} m inside {where} ({label})"
+        checks.append(_Check(clearance > 0.0, clearance, message))
+    if collision.self_collision is not None:
+        own = collision.self_collision.closest(q)
+        message = f"self-collision: {own.first} {-own.distance:.3g} m inside {own.second} ({label})"
+        if own.distance <= 0.0:
+            checks.append(_Check(False, own.distance, message))
+    return min(checks, key=lambda check: check.figure)
 
 
 # -- the cascade for one composition ---------------------------------------------------------
@@ -266,12 +278,12 @@ def check_compositions(
     composition's own IK gives: the verdicts are those of :func:`check_composition`, bit for bit.
     A shared IK's seconds are split among the compositions in proportion to their IK iterations.
     """
-    targets = {"start": np.asarray(task.start, dtype=float), "goal": np.asarray(task.goal, dtype=float)}
+    ends = _ends(task, settings)
     cascades = [_Cascade(composition) for composition in compositions]
     for cascade in cascades:
-        _reach_and_model(cascade, catalog, task, settings, targets)
-    for label, target in targets.items():
-        _at_target([c for c in cascades if c.verdict is None], label, target, settings)
+        _reach_and_model(cascade, catalog, task, settings, ends)
+    for label, end in ends.items():
+        _at_target([c for c in cascades if c.verdict is None], label, end, settings)
     verdicts = []
     for cascade in cascades:
         if cascade.verdict is None:
@@ -306,6 +318,29 @@ class _Cascade:
         return _Built(self.robot, self.collision, self.seeds)
 
 
+class _End(NamedTuple):
+    """What step B asks of the tool at one end: its ``position`` [m], the ``orientation`` (None:
+    free), the position ``tolerance`` [m] of IK and the workspace test, and the ``slack`` [m] the
+    task allows the reach test (its own position tolerance; 0 when it gives none)."""
+
+    position: np.ndarray
+    orientation: Orientation | None
+    tolerance: float
+    slack: float
+
+
+def _ends(task: Task, settings: FeasibilitySettings) -> dict[str, _End]:
+    """The task's start and goal, by label, with the task's tolerances or else the settings'."""
+    ends = {
+        "start": (task.start, task.start_orientation, task.start_tolerance),
+        "goal": (task.goal, task.goal_orientation, task.goal_tolerance),
+    }
+    return {
+        label: _End(np.asarray(position, dtype=float), orientation, tolerance or settings.tolerance, tolerance or 0.0)
+        for label, (position, orientation, tolerance) in ends.items()
+    }
+
+
 class _Built(NamedTuple):
     robot: RobotModel
     collision: Callable[[], CollisionModel]
@@ -313,7 +348,7 @@ class _Built(NamedTuple):
 
 
 def _reach_and_model(
-    cascade: _Cascade, catalog: Catalog, task: Task, settings: FeasibilitySettings, targets: dict[str, np.ndarray]
+    cascade: _Cascade, catalog: Catalog, task: Task, settings: FeasibilitySettings, ends: dict[str, _End]
 ) -> None:
     """The reach test, then (if it passes) the workspace test and the robot model, and (if both
     tests pass) the collision model and the IK seeds of ``cascade``. The workspace box comes
@@ -321,8 +356,9 @@ def _reach_and_model(
     compositions then need no model), else from the model."""
     t0 = time.perf_counter()
     reach = max_reach(cascade.composition, catalog)
-    far_label, far = max(targets.items(), key=lambda item: float(np.linalg.norm(item[1])))
-    cascade.figures["reach_margin"] = reach - float(np.linalg.norm(far))
+    far_label, far_end = max(ends.items(), key=lambda item: float(np.linalg.norm(item[1].position)) - item[1].slack)
+    far = far_end.position
+    cascade.figures["reach_margin"] = reach - float(np.linalg.norm(far)) + far_end.slack
     cascade.clock.time(REACH.name, t0)
     if cascade.figures["reach_margin"] < 0.0:
         cascade.fail(
@@ -333,31 +369,33 @@ def _reach_and_model(
         return
     composition = cascade.composition
     if not catalog.general and not _inside_workspace(
-        cascade, lambda: catalog_workspace_box(composition, catalog), targets, settings
+        cascade, lambda: catalog_workspace_box(composition, catalog), ends
     ):
         return
     t0 = time.perf_counter()
     robot = cascade.robot = robot_model(cascade.composition, catalog, task.payload)
     cascade.clock.time("model", t0)
-    if catalog.general and not _inside_workspace(cascade, lambda: workspace_box(robot), targets, settings):
+    if catalog.general and not _inside_workspace(cascade, lambda: workspace_box(robot), ends):
         return
     t0 = time.perf_counter()
-    cascade.collision = functools.cache(lambda: CollisionModel(robot, task.collision_obstacles))
+    cascade.collision = functools.cache(
+        lambda: CollisionModel(robot, task.collision_obstacles, self_collision=task.self_collision)
+    )
     cascade.seeds = ik_seeds(robot, settings.seeds)
     cascade.clock.time("model", t0)
 
 
-def _inside_workspace(
-    cascade: _Cascade, box_of: Callable[[], WorkspaceBox], targets: dict[str, np.ndarray], settings: FeasibilitySettings
-) -> bool:
-    """The workspace test: whether both targets lie within the IK tolerance of the box
+def _inside_workspace(cascade: _Cascade, box_of: Callable[[], WorkspaceBox], ends: dict[str, _End]) -> bool:
+    """The workspace test: whether both targets lie within their position tolerance of the box
     ``box_of()`` (one farther out is beyond any IK run's reach); records the failure otherwise."""
     t0 = time.perf_counter()
     box = box_of()
-    label, excess = max(((label, box.excess(target)) for label, target in targets.items()), key=lambda x: x[1])
+    label, excess, slack = max(
+        ((label, box.excess(end.position), end.tolerance) for label, end in ends.items()), key=lambda x: x[1] - x[2]
+    )
     cascade.figures["workspace_excess"] = excess
     cascade.clock.time(WORKSPACE.name, t0)
-    if excess <= settings.tolerance:
+    if excess <= slack:
         return True
     span = ", ".join(
         f"{axis} [{round(low, 3) + 0.0:.3f}, {round(high, 3) + 0.0:.3f}]"  # no -0.000 or 1e-16 of rounding
@@ -371,16 +409,16 @@ def _inside_workspace(
     return False
 
 
-def _at_target(cascades: list[_Cascade], label: str, target: np.ndarray, settings: FeasibilitySettings) -> None:
-    """IK, static torque and collision at ``target`` for each of ``cascades``; one whose IK
+def _at_target(cascades: list[_Cascade], label: str, end: _End, settings: FeasibilitySettings) -> None:
+    """IK, static torque and collision at ``end`` for each of ``cascades``; one whose IK
     solutions all fail the other tests is searched again from more seeds before it fails."""
-    outcomes = _solve(cascades, label, target, [c.built().seeds for c in cascades], settings)
+    outcomes = _solve(cascades, label, end, [c.built().seeds for c in cascades], settings)
     if settings.escalation > 1:
         again = [i for i, outcome in enumerate(outcomes) if outcome.solutions and not outcome.kept]
         more = [
             ik_seeds(cascades[i].built().robot, settings.seeds * settings.escalation)[settings.seeds :] for i in again
         ]
-        found = _solve([cascades[i] for i in again], label, target, more, settings, [outcomes[i] for i in again])
+        found = _solve([cascades[i] for i in again], label, end, more, settings, [outcomes[i] for i in again])
         for i, outcome in zip(again, found):
             outcomes[i] = outcome
     for cascade, outcome in zip(cascades, outcomes):
@@ -390,7 +428,7 @@ def _at_target(cascades: list[_Cascade], label: str, target: np.ndarray, setting
 def _solve(
     cascades: list[_Cascade],
     label: str,
-    target: np.ndarray,
+    end: _End,
     seeds: list[np.ndarray],
     settings: FeasibilitySettings,
     earlier: list[_TargetOutcome] | None = None,
@@ -398,14 +436,22 @@ def _solve(
     """IK of every cascade from its ``seeds``, together, then torque and collision on every
     distinct new solution (the ``earlier`` outcomes at the same target, if any, are extended)."""
     t0 = time.perf_counter()
-    runs = solve_position_ik_batch(
-        [(cascade.built().robot, target, start) for cascade, start in zip(cascades, seeds)],
-        tolerance=settings.tolerance,
-        max_iterations=settings.max_iterations,
-    )
+    robots = [cascade.built().robot for cascade in cascades]
+    if end.orientation is None:
+        runs = solve_position_ik_batch(
+            [(robot, end.position, start) for robot, start in zip(robots, seeds)],
+            tolerance=end.tolerance,
+            max_iterations=settings.max_iterations,
+        )
+    else:
+        runs = solve_pose_ik_batch(
+            [(robot, end.position, end.orientation, start) for robot, start in zip(robots, seeds)],
+            tolerance=end.tolerance,
+            max_iterations=settings.max_iterations,
+        )
     _share(time.perf_counter() - t0, [cascade.clock for cascade in cascades], runs)
     befores: Sequence[_TargetOutcome | None] = earlier or [None] * len(cascades)
-    return [_tests(cascade, label, found, settings, before) for cascade, found, before in zip(cascades, runs, befores)]
+    return [_tests(cascade, label, found, end, before) for cascade, found, before in zip(cascades, runs, befores)]
 
 
 def _share(seconds: float, clocks: list[_Clock], runs: list[list[IKResult]]) -> None:
@@ -420,10 +466,15 @@ def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
     """The figures of ``outcome`` at the target ``label``, and the verdict if the composition fails there."""
     figures = cascade.figures
     figures["ik_error"] = max(figures.get("ik_error", 0.0), outcome.error)
+    if outcome.orientation is not None:
+        figures["ik_angle"] = max(figures.get("ik_angle", 0.0), outcome.angle)
     if not outcome.solutions:
+        pose = ""
+        if outcome.orientation is not None:
+            pose = f", {outcome.angle:.3g} rad from the orientation {outcome.orientation.describe()}"
         cascade.fail(
             INVERSE_KINEMATICS.name,
-            f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m)",
+            f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m{pose})",
         )
         return
     # the composition needs at least its best ratio at every target seen so far
@@ -466,10 +517,12 @@ class _TargetOutcome:
     kept: list[np.ndarray]
     best_ratio: float
     closest: tuple[int, float, str] | None  # (tests passed, figure, message) of the best reject
+    angle: float = math.inf  # [rad] of the run nearest to an end that asks an orientation
+    orientation: Orientation | None = None
 
 
 def _tests(
-    cascade: _Cascade, label: str, runs: list[IKResult], settings: FeasibilitySettings, earlier: _TargetOutcome | None
+    cascade: _Cascade, label: str, runs: list[IKResult], end: _End, earlier: _TargetOutcome | None
 ) -> _TargetOutcome:
     """Torque and collision on every distinct new solution of the IK ``runs`` (the ``earlier``
     outcome at the same target, if any, is extended)."""
@@ -477,11 +530,15 @@ def _tests(
     robot = built.robot
     t0 = time.perf_counter()
     known = earlier.solutions if earlier else []
-    solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(settings.tolerance))))
+    solutions = distinct(itertools.chain(known, (r.q for r in runs if r.success(end.tolerance))))
     clock.time(INVERSE_KINEMATICS.name, t0)
     error = min([r.error for r in runs] + ([earlier.error] if earlier else []))
     outcome = earlier or _TargetOutcome([], error, [], math.inf, None)
     outcome.solutions, outcome.error = solutions, error
+    if end.orientation is not None:  # the orientation error of the run nearest to the pose
+        nearest = min(runs, key=lambda r: max(r.error / end.tolerance, r.angle / r.angle_tolerance))
+        outcome.angle = min(outcome.angle, nearest.angle)
+        outcome.orientation = end.orientation
     for q in solutions[len(known) :]:
         t0 = time.perf_counter()
         torque = _torque_check(robot, q, label)

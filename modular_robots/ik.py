@@ -34,14 +34,19 @@ DEFAULT_TOLERANCE = 1e-4
 
 @dataclass(frozen=True)
 class IKResult:
-    """One IK run: final ``q`` (within limits), tool position ``error`` [m], ``iterations``."""
+    """One IK run: final ``q`` (within limits), tool position ``error`` [m], ``iterations``, and
+    for a run that also asks an orientation (:mod:`modular_robots.pose_ik`) its ``angle`` error
+    and the ``angle_tolerance`` [rad] it had to meet."""
 
     q: np.ndarray
     error: float
     iterations: int
+    angle: float = 0.0
+    angle_tolerance: float = math.inf
 
     def success(self, tolerance: float = DEFAULT_TOLERANCE) -> bool:
-        return self.error <= tolerance
+        """Whether the position is within ``tolerance`` [m] and the angle within its own."""
+        return self.error <= tolerance and self.angle <= self.angle_tolerance
 
 
 IKProblem = tuple[RobotModel, np.ndarray, np.ndarray]

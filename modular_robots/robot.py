@@ -170,6 +170,11 @@ class RobotModel:
         pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
         return self.data.oMf[self.tool_frame_id].translation.copy()
 
+    def tool_rotation(self, q: np.ndarray) -> np.ndarray:
+        """The rotation ``(3, 3)`` of the tool frame in the base frame at ``q``."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        return self.data.oMf[self.tool_frame_id].rotation.copy()
+
     def tool_jacobian(self, q: np.ndarray) -> np.ndarray:
         """3 x nv Jacobian of :meth:`tool_position` (base-frame axes)."""
         jacobian = pin.computeFrameJacobian(

@@ -13,6 +13,7 @@ from .costs import COSTS
 from .exceptions import InputError, ScenarioError, shorten
 from .execution import CONNECT_TIMEOUT, ENGINES, ExecutionSettings, address_problem
 from .obstacles import FloorObstacle, Obstacle, SphereObstacle, obstacle_from_fields
+from .orientation import DEFAULT_ANGLE_TOLERANCE, Orientation
 
 __all__ = [
     "Obstacle",
@@ -51,15 +52,25 @@ MAX_FLOOR = 10.0
 class Task:
     """Carry ``payload`` [kg] from tool position ``start`` to ``goal`` [m, base frame], at rest at
     both ends, clear of ``obstacles`` and above the ``floor`` (``z`` [m] in the base frame; None:
-    no floor), minimising ``cost`` (``time`` or ``effort``)."""
+    no floor), minimising ``cost`` (``time`` or ``effort``).
+
+    At each end the tool may also be asked an orientation (``start_orientation``,
+    ``goal_orientation``; None: free) and a position tolerance [m] (``start_tolerance``,
+    ``goal_tolerance``; None: step B's IK tolerance)."""
 
     payload: float
     start: tuple[float, float, float]
     goal: tuple[float, float, float]
     obstacles: tuple[Obstacle, ...] = ()
     cost: str = "time"
-    self_collision: bool = False
+    #: Keep the robot's modules that are not neighbours in the chain apart
+    #: (:mod:`~modular_robots.self_collision`): in step B, step C and verification.
+    self_collision: bool = True
     floor: float | None = 0.0
+    start_orientation: Orientation | None = None
+    goal_orientation: Orientation | None = None
+    start_tolerance: float | None = None
+    goal_tolerance: float | None = None
 
     @property
     def collision_obstacles(self) -> tuple[Obstacle, ...]:
@@ -182,8 +193,8 @@ def _below(value: float, limit: float) -> str:
 
 def _read_task(f: Fields) -> Task:
     payload = f.number("payload", minimum=0.0)
-    start = f.vector("start", 3)
-    goal = f.vector("goal", 3)
+    start, start_orientation, start_tolerance = _read_end(f, "start")
+    goal, goal_orientation, goal_tolerance = _read_end(f, "goal")
     f.check(
         "goal",
         math.dist(start, goal) >= MIN_TRAVEL * (1.0 - 1e-9),  # 1 mm as decimals write it: 1.101 - 1.1 < 1e-3
@@ -204,14 +215,53 @@ def _read_task(f: Fields) -> Task:
         obstacles.append(obstacle)
     floor = _read_floor(f, start, goal)
     cost = f.string("cost", default="time", choices=tuple(COSTS))
-    self_collision = f.boolean("self_collision", default=False)
-    if self_collision:
-        raise f.fail(
-            "self_collision",
-            "self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false",
-        )
+    self_collision = f.boolean("self_collision", default=True)
     f.done()
-    return Task(payload, start, goal, tuple(obstacles), cost, self_collision, floor)
+    return Task(
+        payload,
+        start,
+        goal,
+        tuple(obstacles),
+        cost,
+        self_collision,
+        floor,
+        start_orientation,
+        goal_orientation,
+        start_tolerance,
+        goal_tolerance,
+    )
+
+
+#: The loosest position tolerance of an end [m]: looser, the tool may end anywhere on a table.
+MAX_POSITION_TOLERANCE = 0.1
+
+
+def _read_end(f: Fields, key: str) -> tuple[tuple[float, float, float], Orientation | None, float | None]:
+    """``task.start`` or ``task.goal``: a position ``[x, y, z]``, or a mapping of ``position``
+    and optionally ``rpy`` or ``axis``, ``angle_tolerance`` [rad] and ``position_tolerance`` [m]."""
+    if not isinstance(f.raw(key), dict):
+        return f.vector(key, 3), None, None
+    end = f.mapping(key)
+    position = end.vector("position", 3)
+    for optional in ("rpy", "axis"):  # known keys, for the message of an unknown one
+        end.raw(optional, None)
+    rpy = end.vector("rpy", 3) if end.has("rpy") else None
+    axis = end.vector("axis", 3) if end.has("axis") else None
+    if rpy is not None and axis is not None:
+        raise end.fail("axis", "give rpy (the whole orientation) or axis (the tool's z axis), not both")
+    tolerance = end.number("angle_tolerance", default=None, exclusive_minimum=0.0, maximum=math.pi)
+    if tolerance is not None and rpy is None and axis is None:
+        raise end.fail("angle_tolerance", "an angle tolerance needs an orientation: add rpy or axis")
+    if axis is not None:
+        end.check("axis", math.hypot(*axis) > 1e-9, f"expected a direction, got the zero vector {list(axis)}")
+    position_tolerance = end.number(
+        "position_tolerance", default=None, exclusive_minimum=0.0, maximum=MAX_POSITION_TOLERANCE
+    )
+    end.done()
+    orientation = None
+    if rpy is not None or axis is not None:
+        orientation = Orientation(rpy, axis, DEFAULT_ANGLE_TOLERANCE if tolerance is None else tolerance)
+    return position, orientation, position_tolerance
 
 
 def _read_floor(f: Fields, start: tuple[float, ...], goal: tuple[float, ...]) -> float | None:

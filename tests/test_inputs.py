@@ -288,9 +288,9 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         ),
         (
             "  cost: time",
-            "  cost: time\n  self_collision: true",
+            "  cost: time\n  self_collision: yes",
             "self_collision:",
-            "task.self_collision: self-collision checking is not supported yet (it is off in the paper); remove the key or set it to false",
+            "task.self_collision: expected true or false, got the string 'yes'",
         ),
         ("nodes: 8", "nodes: 1", "nodes:", "optimizer.nodes: expected an integer >= 3, got 1"),
         (

@@ -225,14 +225,16 @@ def test_constraint_jacobian_matches_central_differences(paper, name, transcript
     # The check is not vacuous: the clearance rows and the tf column carry information.
     # clearance rows: the only ones bounded below only (a clearance >= 0 or a margin)
     clearance_rows = np.flatnonzero(np.isfinite(problem.constraint_lower) & np.isinf(problem.constraint_upper))
+    # (and the checked pairs of the arm's own primitives that can come within the margin)
+    self_rows = len(problem.self_collision_rows) * (problem.intervals * problem.substeps - 1)
     if obstacles:
-        n_rows = len(problem.obstacles) * (problem.intervals * problem.substeps - 1)
+        n_rows = len(problem.obstacles) * (problem.intervals * problem.substeps - 1) + self_rows
         assert len(clearance_rows) == n_rows
         # (an obstacle whose closest primitive sits on the first joint's axis has a constant
         # distance; the other one moves with the arm)
         assert np.count_nonzero(np.abs(fd[clearance_rows]).max(axis=1) > 1e-3) >= problem.intervals
     else:
-        assert len(clearance_rows) == 0
+        assert len(clearance_rows) == self_rows
     assert np.abs(fd[:, 0]).max() > 1e-2  # tf moves the motion
 
 
@@ -564,9 +566,9 @@ def test_verification_defect_catches_a_broken_plan():
 def substep_by_substep(problem: ShootingProblem, y: np.ndarray, points: int = 8):
     """A plain reference for :func:`verify`: each sub-step re-integrated on its own by SciPy's
     ``solve_ivp`` (DOP853, the same tolerances) from its planned state, the plan's torque law
-    written out here, every grid point's clearance from FCL one configuration at a time, and the
-    last interval re-integrated whole. Returns the defect, the grid's ``(q, v, tau)`` and
-    clearances, and the state at ``tf``."""
+    written out here, every grid point's clearance from FCL one configuration at a time (or its
+    self-collision depth where the arm overlaps itself), and the last interval re-integrated whole.
+    Returns the defect, the grid's ``(q, v, tau)`` and clearances, and the state at ``tf``."""
     robot, nv = problem.robot, problem.nv
     tf, nodes, controls = problem.unpack(y)
     N, S = problem.intervals, problem.substeps
@@ -598,6 +600,10 @@ def substep_by_substep(problem: ShootingProblem, y: np.ndarray, points: int = 8)
     v = np.array([x[nv:] for x, _ in rows])
     tau = np.array([t for _, t in rows])
     clearance = np.array([problem.collision.min_distance(qk) for qk in q]) if problem.collision else np.array([np.inf])
+    if problem.self_collision is not None:
+        own = np.array([problem.self_collision.min_distance(qk) for qk in q])
+        if own.min() < 0.0:
+            clearance = np.append(clearance, own.min())
     last = solve_ivp(rhs(N - 1), (0.0, S * hs), nodes[N - 1], method="DOP853", rtol=1e-10, atol=1e-10)
     return defect, q, v, tau, clearance, last.y[:, -1]
 
@@ -962,8 +968,10 @@ def test_a_crossing_refinement_cannot_remove_is_solved_again_from_the_first_gues
     obstacle between two clear sub-steps, and a warm refinement to 8 keeps the crossing. Solved
     again from the first guess at 8 sub-steps, the motion goes round: clear at 50 points of every
     row of its plan, measured with the collision model directly, not through verification. (No
-    floor: this solve is the phenomenon; with the floor's rows the solver takes another path.)"""
+    floor and no self-collision: this solve is the phenomenon; with the floor's rows, or the
+    self-collision ones, the solver takes another path.)"""
     scenario = without_floor(load_scenario(PAPER_5KG))
+    scenario = replace(scenario, task=replace(scenario.task, self_collision=False))
     name = "B-J1-L3-J1-L2-J2-L3-J1-L1-E2"
     verdict = check_composition(Composition.from_name(name, scenario.catalog), scenario.catalog, scenario.task)
     (spec,) = candidate_specs([verdict])

@@ -50,5 +50,6 @@ def segment_parameters(p1: np.ndarray, d1: np.ndarray, p2: np.ndarray, d2: np.nd
         t = np.clip(t, 0.0, 1.0)
         s = np.where(below, np.clip(-c / np.where(a > tiny, a, 1.0), 0.0, 1.0), s)
         s = np.where(above, np.clip((b - c) / np.where(a > tiny, a, 1.0), 0.0, 1.0), s)
+    s = np.where(e > tiny, s, np.clip(-c / np.where(a > tiny, a, 1.0), 0.0, 1.0))  # the second a point
     s = np.where(a > tiny, s, 0.0)
     return s, t

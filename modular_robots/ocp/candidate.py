@@ -301,6 +301,8 @@ def _verification_failure(v: Verification) -> str:
         parts.append(f"defect {v.max_defect:.2g} (an interval's summed sub-step re-integration gaps)")
     if not v.clearance_ok:
         parts.append(f"clearance {v.min_clearance:.4f} m < 0 between sub-steps")
+    if not v.orientation_ok:
+        parts.append(f"the tool's orientation at an end is {v.orientation_excess:.3g} rad beyond its tolerance")
     if not v.limits_ok:
         parts.append(
             f"limits exceeded (velocity x{v.velocity_ratio:.3f}, torque x{v.torque_ratio:.3f}, "
@@ -320,7 +322,16 @@ def composition_problem(
     """The shooting problem of ``composition`` for ``task``, from rest at ``q_start`` to rest at
     ``q_goal`` (step B's boundary configurations, :class:`CandidateSpec`)."""
     robot = robot_model(composition, catalog, task.payload)
-    return ShootingProblem(robot, q_start, q_goal, task.collision_obstacles, task.cost, settings)
+    return ShootingProblem(
+        robot,
+        q_start,
+        q_goal,
+        task.collision_obstacles,
+        task.cost,
+        settings,
+        self_collision=task.self_collision,
+        orientations=(task.start_orientation, task.goal_orientation),
+    )
 
 
 def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:

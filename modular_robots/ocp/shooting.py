@@ -5,8 +5,11 @@ Decision variables, scaled to order one: the final time ``tf``, the interior nod
 ``s_1 .. s_{N-1}`` (``s_0`` and ``s_N`` are the fixed rest states at ``q_start`` and ``q_goal``)
 and one control per interval ``u_0 .. u_{N-1}``. Constraints: continuity ``Phi(s_m, u_m, tf) =
 s_{m+1}``; position and velocity limits at every integration sub-step (plain bounds at the
-nodes); obstacle clearance ``>= margin`` at every sub-step; torque limits (plain bounds when the
-controls are torques, else at every sub-step). Jacobians are exact and assembled sparse.
+nodes); obstacle clearance ``>= margin`` at every sub-step, and the distance of every checked pair
+of the robot's own primitives that can come that close (:mod:`~modular_robots.self_collision`) too
+(a pair never sampled twice the margin apart, or nearer than that at the start or the goal: half the smaller distance);
+torque limits (plain bounds when the controls are torques, else at every sub-step). Jacobians are
+exact and assembled sparse.
 
 When the velocity is linear in time within an interval (the inverse transcription), every
 sub-step's velocity lies between the two node velocities, so the node bounds already hold it and
@@ -38,8 +41,10 @@ from ..collision import CollisionModel
 from ..costs import COSTS, Cost
 from ..exceptions import ModularRobotsError, ProblemError
 from ..obstacles import Obstacle
+from ..orientation import Orientation
 from ..robot import RobotModel
 from ..scenario import OptimizerSettings
+from ..self_collision import SelfCollisionModel
 from .guess import detour_path, path_times
 from .hessian import kinematic_hessians, rnea_curvature, torque_hessians
 from .transcription import Propagation, positive_or_one, transcription
@@ -86,6 +91,14 @@ class ShootingProblem:
     waypoints
         Joint-space path ``(K, nv)`` of the initial guess, from ``q_start`` to ``q_goal``
         (default: :func:`~modular_robots.ocp.guess.detour_path`).
+    self_collision
+        Keep the robot's checked pairs of primitives
+        (:func:`~modular_robots.self_collision.checked_pairs`) apart by the clearance margin too
+        (the module docstring). Their rows join the ``clearance`` block, after the obstacles' at
+        each sub-step.
+    orientations
+        The tool orientations the task asks at the start and the goal (None: free); the ends are
+        fixed at ``q_start`` and ``q_goal``, so this is for verification to measure.
     """
 
     def __init__(
@@ -98,6 +111,8 @@ class ShootingProblem:
         settings: OptimizerSettings = OptimizerSettings(),
         substeps: int | None = None,
         waypoints: np.ndarray | None = None,
+        self_collision: bool = True,
+        orientations: tuple[Orientation | None, Orientation | None] = (None, None),
     ):
         if robot.nq != robot.nv:
             raise ProblemError(
@@ -114,6 +129,9 @@ class ShootingProblem:
         self.objective: Cost = COSTS[cost] if isinstance(cost, str) else cost
         self.cost_name = self.objective.name
         self.obstacles = tuple(obstacles)
+        #: The tool orientation the task asks at the start and the goal (None: free), which
+        #: ``q_start`` and ``q_goal`` meet (step B's IK) and verification measures.
+        self.orientations = orientations
         self.transcription = transcription(settings.transcription)
         self.intervals = settings.nodes - 1
         self.substeps = int(substeps or settings.substeps)
@@ -134,6 +152,31 @@ class ShootingProblem:
             for label, q in (("q_start", self.q_start), ("q_goal", self.q_goal)):
                 if self.collision.min_distance(q) < 0.0:
                     raise ProblemError(f"{label} is in collision with an obstacle")
+        #: The checked pairs of the robot's own primitives (None: self-collision off or no pair).
+        self.self_collision: SelfCollisionModel | None = None
+        if self_collision:
+            model = SelfCollisionModel(robot)
+            self.self_collision = model if len(model) else None
+        if self.self_collision is not None:
+            for label, q in (("q_start", self.q_start), ("q_goal", self.q_goal)):
+                contact = self.self_collision.closest(q)
+                if contact.distance < 0.0:
+                    raise ProblemError(f"{label} is in self-collision ({contact.first} and {contact.second})")
+        #: The checked pairs that can come within the margin: those the clearance rows keep apart,
+        #: each by the margin or, for a pair never seen farther apart than twice the margin (shapes
+        #: a design keeps close) or nearer than that at the start or the goal (which step B holds
+        #: to no overlap only, and the sub-steps next to them could not leave fast enough), by
+        #: half the smaller of those distances.
+        self._self_rows = np.zeros(0, dtype=int)
+        self._self_margins = np.zeros(0)
+        if self.self_collision is not None:
+            assert self.self_collision.farthest is not None  # the checked pairs
+            self._self_rows = self.self_collision.within(settings.clearance_margin)
+            at_ends = self.self_collision.distances(np.vstack([self.q_start, self.q_goal]))[0].min(axis=0)
+            self._self_margins = np.minimum(
+                settings.clearance_margin,
+                0.5 * np.minimum(self.self_collision.farthest, at_ends)[self._self_rows],
+            )
         N = self.intervals
         #: A lower bound of the cost [s], valid by construction (the cost's
         #: :meth:`~modular_robots.costs.Cost.lower_bound`). Used by step D to prune a candidate
@@ -198,6 +241,8 @@ class ShootingProblem:
             self.settings,
             substeps or self.substeps,
             self.waypoints if waypoints is None else waypoints,
+            self.self_collision is not None,
+            self.orientations,
         )
 
     def _configuration(self, q, label) -> np.ndarray:
@@ -251,7 +296,7 @@ class ShootingProblem:
         N, S, n, nv = self.intervals, self.substeps, self.nx, self.nv
         p = n + nv + 1
         cols = self._cols = np.array([self._interval_columns(m) for m in range(N)])
-        pairs = len(self.collision.obstacles) if self.collision else 0
+        pairs = (len(self.collision.obstacles) if self.collision else 0) + len(self._self_rows)
         blocks = [("continuity", 1, n), ("path", S - 1, n), ("midpoint", S, nv), ("clearance", S, pairs)]
         if not self.transcription.controls_are_torques:
             blocks.append(("torque", S + 1, nv))
@@ -276,7 +321,9 @@ class ShootingProblem:
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (self._x_lo[:nv], self._x_hi[:nv]))
                 sc = np.broadcast_to(self.x_scale[:nv], (N, k, r))
             elif name == "clearance":
-                lo, hi = np.full((N, k, r), self.settings.clearance_margin), np.full((N, k, r), np.inf)
+                margins = np.full(r, self.settings.clearance_margin)
+                margins[r - len(self._self_margins) :] = self._self_margins
+                lo, hi = np.broadcast_to(margins, (N, k, r)), np.full((N, k, r), np.inf)
                 sc = np.ones((N, k, r))
             else:
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.effort_bound, self.effort_bound))
@@ -354,7 +401,7 @@ class ShootingProblem:
         if derivatives:
             assert prop.state_sens is not None and prop.torque_sens is not None and middle_sens is not None
             blocks = [prop.state_sens[:, S], prop.state_sens[:, 1:S], middle_sens]
-            if self.collision is not None:
+            if clear.shape[1]:
                 blocks.append(clear_grad.reshape(N, S, -1, nv) @ prop.state_sens[:, :S, :nv])
             if not self.transcription.controls_are_torques:
                 blocks.append(prop.torque_sens)
@@ -449,9 +496,29 @@ class ShootingProblem:
         return middle, sens
 
     def _clearance(self, qs: np.ndarray, derivatives: bool):
-        if self.collision is None:
+        """The clearance rows' values at ``qs`` ``(K, nv)``: every obstacle's distance to the
+        robot, then the distance of every checked pair that can come within the margin, ``(K, r)``,
+        and their gradients ``(K, r, nv)``."""
+        parts = []
+        if self.collision is not None:
+            parts.append(self.collision.closest_many(qs, derivatives))
+        if len(self._self_rows):
+            assert self.self_collision is not None
+            distance, grad = self.self_collision.distances(qs, derivatives)
+            parts.append((distance[:, self._self_rows], None if grad is None else grad[:, self._self_rows]))
+        if not parts:
             return np.zeros((len(qs), 0)), (np.zeros((len(qs), 0, self.nv)) if derivatives else None)
-        return self.collision.closest_many(qs, derivatives)
+        if len(parts) == 1:
+            return parts[0]
+        (d1, g1), (d2, g2) = parts
+        grad = None if g1 is None or g2 is None else np.concatenate([g1, g2], axis=1)
+        return np.concatenate([d1, d2], axis=1), grad
+
+    @property
+    def self_collision_rows(self) -> np.ndarray:
+        """Indices into ``self_collision.pairs`` of the pairs with clearance rows, in the order of
+        their rows (after the obstacles') at each sub-step."""
+        return self._self_rows.copy()
 
     @property
     def interval_columns(self) -> np.ndarray:

@@ -8,7 +8,12 @@ error; summed over an interval's sub-steps it is the interval's *defect*: for th
 transcription RK4's discretisation error, which more sub-steps remove, and for the inverse one
 (exact parabolas) only a continuity gap. The terminal tool-position error comes from one
 re-integration of the whole last interval from its node. On a dense time grid of the re-integrated
-motion we measure the obstacle clearance (FCL), the joint limits and the torques.
+motion we measure the obstacle clearance (FCL), the joint limits and the torques, and, unless
+self-collision is off, the distance of every checked pair of the robot's own primitives
+(:mod:`~modular_robots.self_collision`, closed form): a pair that overlaps on the grid gives the
+clearance its (negative) distance, so that a link passing through another between two sub-steps
+fails the plan as one passing through an obstacle does; the clearance of a plan clear of itself is
+its obstacles'.
 
 Why restart at every sub-step and not integrate open loop over an interval or the whole motion:
 a serial arm under gravity is an unstable open-loop system, so a long integration amplifies
@@ -155,6 +160,10 @@ def verify(
     clearance = np.inf
     if problem.collision is not None:  # an interval's samples at a time: bounded memory
         clearance = min(float(problem.collision.closest_many(part)[0].min()) for part in np.array_split(q, N))
+    if problem.self_collision is not None:
+        own = min(float(problem.self_collision.distances(part)[0].min()) for part in np.array_split(q, N))
+        if own < 0.0:
+            clearance = min(clearance, own)
     pos_excess = float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span))
     vel_share = np.max(np.abs(v) / vmax, axis=0)
     tau_share = np.max(np.abs(torques) / tmax, axis=0)
@@ -162,6 +171,10 @@ def verify(
     last = _integrate(problem, nodes[N - 1 : N], controls[N - 1 :], np.zeros(1), nodes[N - 1 : N], S * hs, rtol, atol)
     x = last[0][0] if last is not None else np.full(2 * nv, np.inf)
     error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(problem.q_goal)))
+    excess = 0.0
+    for orientation, q in zip(problem.orientations, (nodes[0, :nv], nodes[N, :nv])):
+        if orientation is not None:
+            excess = max(excess, orientation.angle(robot.tool_rotation(q)) - orientation.tolerance)
     return Verification(
         error,
         float(np.max(np.abs(x[nv:]))),
@@ -174,4 +187,5 @@ def verify(
         S,
         tuple(map(float, vel_share)),
         tuple(map(float, tau_share)),
+        excess,
     )

@@ -94,6 +94,10 @@ def task_json(task: Task) -> dict:
         "goal": list(task.goal),
         "obstacles": [obstacle_to_json(o) for o in task.collision_obstacles],
         "cost": task.cost,
+        "start_orientation": task.start_orientation.to_json() if task.start_orientation else None,
+        "goal_orientation": task.goal_orientation.to_json() if task.goal_orientation else None,
+        "start_tolerance": task.start_tolerance,
+        "goal_tolerance": task.goal_tolerance,
     }
 
 
@@ -337,6 +341,7 @@ def _verification(n: Node) -> VerificationRecord:
         substeps=n["substeps"].integer(),
         velocity_share=n["velocity_share"].numbers(0.0),
         effort_share=n["effort_share"].numbers(0.0),
+        orientation_excess=n["orientation_excess"].number(0.0) if n.has("orientation_excess") else 0.0,
         passed=n["passed"].boolean(),
     )
 

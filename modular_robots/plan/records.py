@@ -103,6 +103,7 @@ class VerificationRecord:
     substeps: int
     velocity_share: tuple[float, ...]
     effort_share: tuple[float, ...]
+    orientation_excess: float
     passed: bool
 
 

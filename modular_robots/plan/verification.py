@@ -6,7 +6,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Verification", "TERMINAL_TOLERANCE", "DEFECT_TOLERANCE", "LIMIT_TOLERANCE", "CLEARANCE_TOLERANCE"]
+__all__ = [
+    "Verification",
+    "TERMINAL_TOLERANCE",
+    "DEFECT_TOLERANCE",
+    "LIMIT_TOLERANCE",
+    "CLEARANCE_TOLERANCE",
+    "ANGLE_TOLERANCE",
+]
 
 #: Largest terminal tool-position error accepted without refinement [m] (SPEC §5: 1 cm).
 TERMINAL_TOLERANCE = 0.01
@@ -17,6 +24,8 @@ DEFECT_TOLERANCE = 1e-3
 LIMIT_TOLERANCE = 1e-3
 #: Penetration still counted as clear on the dense grid [m] (solver tolerance, not physics).
 CLEARANCE_TOLERANCE = 1e-5
+#: Angle beyond an end's orientation tolerance still counted as within it [rad] (rounding).
+ANGLE_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -32,7 +41,9 @@ class Verification:
     range; ``velocity_ratio``, ``torque_ratio``: largest ``|value| / limit``; ``grid_points``: samples
     checked; ``substeps``: RK4 sub-steps per interval of the solution; ``velocity_share``,
     ``effort_share``: per joint, the largest ``|value| / limit`` on the grid (between the plan's
-    rows too, where a torque can exceed its value at the rows).
+    rows too, where a torque can exceed its value at the rows); ``orientation_excess`` [rad]: at
+    the ends of the plan, by how much the angle between the tool's orientation and the one the
+    task asks there exceeds its tolerance (0 within it, or when the task asks none).
     """
 
     terminal_error: float
@@ -46,6 +57,7 @@ class Verification:
     substeps: int
     velocity_share: tuple[float, ...] = ()
     effort_share: tuple[float, ...] = ()
+    orientation_excess: float = 0.0
 
     @property
     def terminal_ok(self) -> bool:
@@ -64,9 +76,13 @@ class Verification:
         return self.min_clearance >= -CLEARANCE_TOLERANCE
 
     @property
+    def orientation_ok(self) -> bool:
+        return self.orientation_excess <= ANGLE_TOLERANCE
+
+    @property
     def defect_ok(self) -> bool:
         return self.max_defect <= DEFECT_TOLERANCE
 
     @property
     def passed(self) -> bool:
-        return self.terminal_ok and self.defect_ok and self.limits_ok and self.clearance_ok
+        return self.terminal_ok and self.defect_ok and self.limits_ok and self.clearance_ok and self.orientation_ok
