@@ -35,6 +35,7 @@ from .feasibility import (
     filter_compositions,
 )
 from .ocp.candidate import CandidateSpec, make_candidate
+from .ocp.ends import free_ends_bound, task_ends
 from .ocp.solver import ITERATION_LIMIT, Iterate
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
@@ -112,6 +113,8 @@ def cost_bound(scenario: Scenario, spec: CandidateSpec) -> float:
         return 0.0
     robot = robot_model(spec.composition, scenario.catalog, scenario.task.payload)
     velocity_bound = scenario.optimizer.velocity_margin * robot.velocity_limit
+    if scenario.optimizer.free_ends:
+        return free_ends_bound(cost.name, robot, task_ends(scenario.task), velocity_bound)
     q_start, q_goal = np.asarray(spec.q_start, dtype=float), np.asarray(spec.q_goal, dtype=float)
     return cost.lower_bound(robot, q_start, q_goal, velocity_bound)
 

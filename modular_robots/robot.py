@@ -7,6 +7,7 @@ Collision primitives are segments with a radius, attached to a frame: a capsule 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -115,6 +116,34 @@ class RobotModel:
         limited = np.isfinite(velocity) & (velocity > 0)
         moves = np.abs(np.asarray(q_b, dtype=float) - np.asarray(q_a, dtype=float))
         return float(np.max(moves[limited] / velocity[limited], initial=0.0))
+
+    def tool_speed_bound(self, velocity: np.ndarray | None = None) -> float:
+        """An upper bound on the tool's speed [m/s] in any configuration within the velocity
+        limits (or the bounds ``velocity``): each revolute joint's speed times an upper bound on
+        the tool's distance from its axis (the distance from its origin: along the chain, each
+        joint placement's offset, a prismatic joint's largest travel and the tool's offset), plus
+        each prismatic joint's speed. A joint without a finite limit makes it infinite."""
+        model = self.model
+        velocity = self.velocity_limit if velocity is None else np.asarray(velocity, dtype=float)
+        frame = model.frames[self.tool_frame_id]
+        chain = []
+        j = frame.parentJoint
+        while j > 0:
+            chain.append(j)
+            j = model.parents[j]
+        speed, distance = 0.0, float(np.linalg.norm(frame.placement.translation))
+        child_offset = 0.0
+        for j in chain:  # from the tool's joint toward the base
+            joint = model.joints[j]
+            distance += child_offset
+            prismatic = joint.shortname().startswith("JointModelP")
+            if prismatic:
+                low, high = model.lowerPositionLimit[joint.idx_q], model.upperPositionLimit[joint.idx_q]
+                distance += max(abs(low), abs(high))
+            rate = velocity[joint.idx_v]
+            speed += abs(rate) if prismatic else abs(rate) * distance
+            child_offset = float(np.linalg.norm(model.jointPlacements[j].translation))
+        return float(speed) if np.isfinite(speed) else math.inf
 
     @property
     def effort_limit(self) -> np.ndarray:

@@ -102,6 +102,10 @@ class OptimizerSettings:
     velocity_margin: float = 0.95
     #: The solver of step C, by name (:data:`SOLVERS`).
     solver: str = "trust-constr"
+    #: Whether step C chooses the start and goal configurations itself, anywhere the tool is within
+    #: the task's tolerances of the asked poses (step B's IK pair is the first guess), instead of
+    #: keeping step B's.
+    free_ends: bool = False
 
 
 @dataclass(frozen=True)
@@ -304,6 +308,7 @@ def _read_optimizer(f: Fields | None) -> OptimizerSettings:
         effort_margin=f.number("effort_margin", default=d.effort_margin, exclusive_minimum=0.0, maximum=1.0),
         velocity_margin=f.number("velocity_margin", default=d.velocity_margin, exclusive_minimum=0.0, maximum=1.0),
         solver=f.string("solver", default=d.solver, choices=SOLVERS),
+        free_ends=f.boolean("free_ends", default=d.free_ends),
     )
     f.done()
     return settings

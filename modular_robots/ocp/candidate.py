@@ -25,6 +25,7 @@ from ..plan.candidate import CandidateResult, CandidateStatus
 from ..plan.verification import Verification
 from ..robot import robot_model
 from ..scenario import OptimizerSettings, Scenario, Task
+from .ends import task_ends
 from .guess import swing_path
 from .shooting import ShootingProblem
 from .solver import Iterate, SolverOutcome
@@ -231,6 +232,10 @@ class Candidate:
     def _finish(self, status: CandidateStatus, reason: str, verification: Verification | None):
         last, problem = self.last, self.problem
         optimal = status == CandidateStatus.OPTIMAL
+        ends = (problem.q_start, problem.q_goal)  # where the plan starts and ends
+        if problem.free_ends is not None and last is not None:
+            nodes = problem.unpack(last.y)[1][:, : problem.nv]
+            ends = (nodes[0], nodes[-1])
         trajectory = None
         if optimal:
             assert last is not None  # an optimal solve ends on an iterate
@@ -243,7 +248,7 @@ class Candidate:
             iterations=last.iteration if last else 0,
             seconds=self._seconds,
             cost=last.cost if last else np.nan,
-            tf=last.tf if last else np.nan,
+            tf=last.tf if last and last.tf >= 0.0 else np.nan,  # trust-constr's iterates may leave tf's bounds
             constraint_violation=last.constraint_violation if last else np.nan,
             cost_history=tuple(self.history),
             violation_history=tuple(self.violations),
@@ -253,8 +258,8 @@ class Candidate:
             cost_bound=problem.cost_bound,
             composition=self.composition,
             boundary_pair=self.boundary_pair,
-            q_start=tuple(float(v) for v in problem.q_start),
-            q_goal=tuple(float(v) for v in problem.q_goal),
+            q_start=tuple(float(v) for v in ends[0]),
+            q_goal=tuple(float(v) for v in ends[-1]),
             y=last.y if last else None,
             waypoints=problem.waypoints,
             trajectory=trajectory,
@@ -331,6 +336,7 @@ def composition_problem(
         settings,
         self_collision=task.self_collision,
         orientations=(task.start_orientation, task.goal_orientation),
+        free_ends=task_ends(task) if settings.free_ends else None,
     )
 
 

@@ -45,6 +45,7 @@ from ..orientation import Orientation
 from ..robot import RobotModel
 from ..scenario import OptimizerSettings
 from ..self_collision import SelfCollisionModel
+from .ends import ToolEnd, end_rows, free_ends_bound
 from .guess import detour_path, path_times
 from .hessian import kinematic_hessians, rnea_curvature, torque_hessians
 from .transcription import Propagation, positive_or_one, transcription
@@ -97,8 +98,12 @@ class ShootingProblem:
         (the module docstring). Their rows join the ``clearance`` block, after the obstacles' at
         each sub-step.
     orientations
-        The tool orientations the task asks at the start and the goal (None: free); the ends are
-        fixed at ``q_start`` and ``q_goal``, so this is for verification to measure.
+        The tool orientations the task asks at the start and the goal (None: free), for
+        verification to measure.
+    free_ends
+        The tool poses asked at the start and the goal (:class:`~modular_robots.ocp.ends.ToolEnd`):
+        the ends become variables ``q_0`` and ``q_N`` (at rest), kept within those poses, with
+        ``q_start`` and ``q_goal`` their first guess (None: the ends are fixed there).
     """
 
     def __init__(
@@ -113,6 +118,7 @@ class ShootingProblem:
         waypoints: np.ndarray | None = None,
         self_collision: bool = True,
         orientations: tuple[Orientation | None, Orientation | None] = (None, None),
+        free_ends: tuple[ToolEnd, ToolEnd] | None = None,
     ):
         if robot.nq != robot.nv:
             raise ProblemError(
@@ -178,10 +184,17 @@ class ShootingProblem:
                 0.5 * np.minimum(self.self_collision.farthest, at_ends)[self._self_rows],
             )
         N = self.intervals
+        #: The tool poses the free ends keep (None: the ends are fixed at ``q_start``, ``q_goal``).
+        self.free_ends = free_ends
         #: A lower bound of the cost [s], valid by construction (the cost's
-        #: :meth:`~modular_robots.costs.Cost.lower_bound`). Used by step D to prune a candidate
+        #: :meth:`~modular_robots.costs.Cost.lower_bound`; with free ends,
+        #: :func:`~modular_robots.ocp.ends.free_ends_bound`). Used by step D to prune a candidate
         #: before it is solved.
-        self.cost_bound = self.objective.lower_bound(robot, self.q_start, self.q_goal, self.velocity_bound)
+        self.cost_bound = (
+            self.objective.lower_bound(robot, self.q_start, self.q_goal, self.velocity_bound)
+            if free_ends is None
+            else free_ends_bound(self.cost_name, robot, free_ends, self.velocity_bound)
+        )
         self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
         self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
 
@@ -199,9 +212,14 @@ class ShootingProblem:
         self.x_scale = np.concatenate([q_scale, v_scale])
         self.u_scale = self.transcription.control_scale(robot, self.tf_guess, N)
         self.tau_scale = positive_or_one(robot.effort_limit)
-        self.n_variables = 1 + (N - 1) * n + N * nv
         self._u0 = 1 + (N - 1) * n
-        self.variable_scale = np.concatenate([[self.tf_guess], np.tile(self.x_scale, N - 1), np.tile(self.u_scale, N)])
+        #: The first column of the free ends ``q_0, q_N`` (after the controls; none when fixed).
+        self._ends0 = self._u0 + N * nv
+        ends = 0 if free_ends is None else 2
+        self.n_variables = self._ends0 + ends * nv
+        self.variable_scale = np.concatenate(
+            [[self.tf_guess], np.tile(self.x_scale, N - 1), np.tile(self.u_scale, N), np.tile(q_scale, ends)]
+        )
         guess_u = self.transcription.initial_controls(robot, guess_nodes[:-1, :nv], guess_nodes[:-1, nv:], guess_acc)
         if self.transcription.controls_are_torques:
             guess_u = np.clip(guess_u, -self.effort_bound, self.effort_bound)
@@ -213,15 +231,23 @@ class ShootingProblem:
     # -- layout --------------------------------------------------------------------------
     def pack(self, tf: float, nodes: np.ndarray, controls: np.ndarray) -> np.ndarray:
         """Scaled decision vector from ``tf`` [s], all ``N + 1`` node states and ``N`` controls."""
-        z = np.concatenate([[tf], np.asarray(nodes)[1:-1].ravel(), np.asarray(controls).ravel()])
-        return z / self.variable_scale
+        nodes = np.asarray(nodes)
+        parts: list[np.ndarray] = [np.array([tf]), nodes[1:-1].ravel(), np.asarray(controls).ravel()]
+        if self.free_ends is not None:
+            parts += [nodes[0, : self.nv], nodes[-1, : self.nv]]
+        return np.concatenate(parts) / self.variable_scale
 
     def unpack(self, y: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """``(tf, nodes (N + 1, 2 nv), controls (N, nv))`` in SI units from a scaled vector."""
         z = np.asarray(y, dtype=float) * self.variable_scale
         inner = z[1 : self._u0].reshape(self.intervals - 1, self.nx)
-        nodes = np.vstack([self.x_start, inner, self.x_goal])
-        return float(z[0]), nodes, z[self._u0 :].reshape(self.intervals, self.nv)
+        first, last = self.x_start, self.x_goal
+        if self.free_ends is not None:
+            rest = np.zeros(self.nv)
+            first = np.concatenate([z[self._ends0 : self._ends0 + self.nv], rest])
+            last = np.concatenate([z[self._ends0 + self.nv :], rest])
+        nodes = np.vstack([first, inner, last])
+        return float(z[0]), nodes, z[self._u0 : self._ends0].reshape(self.intervals, self.nv)
 
     def initial_guess(self) -> np.ndarray:
         """Straight line in joint space (or a clear detour, see :mod:`~modular_robots.ocp.guess`), a trapezoidal
@@ -243,6 +269,7 @@ class ShootingProblem:
             self.waypoints if waypoints is None else waypoints,
             self.self_collision is not None,
             self.orientations,
+            self.free_ends,
         )
 
     def _configuration(self, q, label) -> np.ndarray:
@@ -285,8 +312,11 @@ class ShootingProblem:
             u_lo, u_hi = -self.effort_bound, self.effort_bound
         else:
             u_lo, u_hi = np.full(nv, -np.inf), np.full(nv, np.inf)
-        lb = np.concatenate([[1e-3 * self.tf_guess], np.tile(x_lo, N - 1), np.tile(u_lo, N)])
-        ub = np.concatenate([[1e3 * self.tf_guess], np.tile(x_hi, N - 1), np.tile(u_hi, N)])
+        ends = 0 if self.free_ends is None else 2
+        lb = np.concatenate(
+            [[1e-3 * self.tf_guess], np.tile(x_lo, N - 1), np.tile(u_lo, N), np.tile(robot.lower, ends)]
+        )
+        ub = np.concatenate([[1e3 * self.tf_guess], np.tile(x_hi, N - 1), np.tile(u_hi, N), np.tile(robot.upper, ends)])
         self.variable_lower = lb / self.variable_scale
         self.variable_upper = ub / self.variable_scale
         self._x_lo, self._x_hi = x_lo, x_hi
@@ -331,19 +361,38 @@ class ShootingProblem:
             lower_parts.append(np.ravel(lo))
             upper_parts.append(np.ravel(hi))
             scale_parts.append(np.ravel(sc))
+        end_columns = np.zeros((0, nv), dtype=int)
+        if self.free_ends is not None:  # the tool poses at q_0 and q_N, then q_N's clearance
+            start_end, goal_end = self.free_ends
+            q0, qN = self._ends0 + np.arange(nv), self._ends0 + nv + np.arange(nv)
+            end_columns = np.vstack([np.tile(q0, (start_end.size, 1)), np.tile(qN, (goal_end.size + pairs, 1))])
+            rows["ends"] = start + np.arange(len(end_columns))
+            (start_lo, start_hi), (goal_lo, goal_hi) = start_end.bounds(), goal_end.bounds()
+            clear_lo = np.full(pairs, self.settings.clearance_margin)
+            clear_lo[pairs - len(self._self_margins) :] = self._self_margins
+            lower_parts.append(np.concatenate([start_lo, goal_lo, clear_lo]))
+            upper_parts.append(np.concatenate([start_hi, goal_hi, np.full(pairs, np.inf)]))
+            scale_parts.append(np.ones(len(end_columns)))
         lower, upper, scale = (np.concatenate(v) for v in (lower_parts, upper_parts, scale_parts))
         self._rows = rows
         self.row_scale = scale
-        # Entries in evaluation order: block local Jacobians, then continuity's -I on s_{m+1}.
+        # Entries in evaluation order: block local Jacobians, then continuity's -I on s_{m+1},
+        # then the free ends' rows.
         row_parts = [np.broadcast_to(rows[name][..., None], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
         col_parts = [np.broadcast_to(cols[:, None, None, :], rows[name].shape + (p,)).ravel() for name, _, _ in blocks]
-        next_cols = np.array([1 + m * n + np.arange(n) if m < N - 1 else np.full(n, -1) for m in range(N)])
+        goal_cols = np.full(n, -1)
+        if self.free_ends is not None:
+            goal_cols[:nv] = self._ends0 + nv + np.arange(nv)
+        next_cols = np.array([1 + m * n + np.arange(n) if m < N - 1 else goal_cols for m in range(N)])
         row_parts.append(rows["continuity"][:, 0, :].ravel())
         col_parts.append(next_cols.ravel())
+        if self.free_ends is not None:
+            row_parts.append(np.repeat(rows["ends"], nv))
+            col_parts.append(end_columns.ravel())
         entry_rows, entry_cols = np.concatenate(row_parts), np.concatenate(col_parts)
-        # Drop clearance rows of the fixed start point and rows without a finite bound.
+        # Drop clearance rows of a fixed start point and rows without a finite bound.
         keep_row = np.isfinite(lower) | np.isfinite(upper)
-        if pairs:
+        if pairs and self.free_ends is None:
             keep_row[rows["clearance"][0, 0]] = False
         new_row = np.cumsum(keep_row) - 1
         self._keep_row = keep_row
@@ -395,6 +444,8 @@ class ShootingProblem:
         ]
         if not self.transcription.controls_are_torques:
             values.append(prop.torques.ravel())
+        end_values, end_jacobian = self._end_rows(nodes, derivatives)
+        values.append(end_values)
         c = (np.concatenate(values) / self.row_scale)[self._keep_row]
         cost, cost_grad = self.objective.evaluate(self, tf, prop, derivatives)
         jac = None
@@ -406,6 +457,8 @@ class ShootingProblem:
             if not self.transcription.controls_are_torques:
                 blocks.append(prop.torque_sens)
             blocks.append(np.full(N * n, -1.0))
+            if end_jacobian is not None:
+                blocks.append(end_jacobian)
             data = np.concatenate([b.ravel() for b in blocks])[self._keep_entry] * self._entry_factor
             jac = sparse.csr_matrix(
                 (data[self._csr_order], self._csr_indices, self._csr_indptr),
@@ -495,6 +548,23 @@ class ShootingProblem:
         sens[..., -1] += 0.125 * (v[:, :S] - v[:, 1:]) / (N * S)
         return middle, sens
 
+    def _end_rows(self, nodes: np.ndarray, derivatives: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """The free ends' rows (:mod:`~modular_robots.ocp.ends`: the tool poses at ``q_0`` and
+        ``q_N``, then ``q_N``'s clearance rows) and their Jacobian with respect to ``q_0`` or
+        ``q_N``, one row of ``nv`` each; nothing when the ends are fixed."""
+        if self.free_ends is None:
+            return np.zeros(0), (np.zeros((0, self.nv)) if derivatives else None)
+        start_end, goal_end = self.free_ends
+        q0, qN = nodes[0, : self.nv], nodes[-1, : self.nv]
+        start_values, start_jacobian = end_rows(self.robot, start_end, q0, derivatives)
+        goal_values, goal_jacobian = end_rows(self.robot, goal_end, qN, derivatives)
+        clear, clear_grad = self._clearance(qN[None], derivatives)
+        values = np.concatenate([start_values, goal_values, clear[0]])
+        if not derivatives:
+            return values, None
+        assert start_jacobian is not None and goal_jacobian is not None and clear_grad is not None
+        return values, np.vstack([start_jacobian, goal_jacobian, clear_grad[0]])
+
     def _clearance(self, qs: np.ndarray, derivatives: bool):
         """The clearance rows' values at ``qs`` ``(K, nv)``: every obstacle's distance to the
         robot, then the distance of every checked pair that can come within the margin, ``(K, r)``,
@@ -527,9 +597,12 @@ class ShootingProblem:
         return self._cols
 
     def _interval_columns(self, m: int) -> np.ndarray:
-        """Global columns of interval ``m``'s parameters ``(s_m, u_m, tf)``; -1 for fixed ``s_0``."""
+        """Global columns of interval ``m``'s parameters ``(s_m, u_m, tf)``; -1 for fixed ``s_0``
+        (with free ends, its velocity only: ``q_0`` is a variable)."""
         n, nv = self.nx, self.nv
         state = 1 + (m - 1) * n + np.arange(n) if m >= 1 else np.full(n, -1)
+        if m == 0 and self.free_ends is not None:
+            state[:nv] = self._ends0 + np.arange(nv)
         return np.concatenate([state, self._u0 + m * nv + np.arange(nv), [0]])
 
     # -- conveniences for the solver ----------------------------------------------------------

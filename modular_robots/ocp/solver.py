@@ -355,7 +355,7 @@ class ShootingSolver:
 
         if exact and problem.has_exact_hessian and self.hessian == "structured":
             exact_rows = problem.rows_of("continuity", "path", "midpoint", "torque")
-            clearance_rows = problem.rows_of("clearance")
+            clearance_rows = problem.rows_of("clearance", *(("ends",) if problem.free_ends is not None else ()))
             constraints = [
                 _rows_constraint(problem, exact_rows, lambda y, v: problem.exact_hessian(y, v, exact_rows)),
                 _rows_constraint(problem, clearance_rows, _SR1()),

@@ -170,7 +170,7 @@ def verify(
     points = len(states)
     last = _integrate(problem, nodes[N - 1 : N], controls[N - 1 :], np.zeros(1), nodes[N - 1 : N], S * hs, rtol, atol)
     x = last[0][0] if last is not None else np.full(2 * nv, np.inf)
-    error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(problem.q_goal)))
+    error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(nodes[N, :nv])))
     excess = 0.0
     for orientation, q in zip(problem.orientations, (nodes[0, :nv], nodes[N, :nv])):
         if orientation is not None:
