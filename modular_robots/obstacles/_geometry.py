@@ -4,10 +4,15 @@ two segments, vectorised over any leading axes."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["rpy_matrix", "segment_parameters", "pose_columns"]
+__all__ = ["rpy_matrix", "segment_parameters", "pose_columns", "golden_minimum", "SEARCH_STEPS"]
+
+#: Golden-section steps of :func:`golden_minimum`: the bracket shrinks to 0.618^64 (about 1e-13).
+SEARCH_STEPS = 64
+_GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 def rpy_matrix(rpy: tuple[float, float, float]) -> np.ndarray:
@@ -53,3 +58,29 @@ def segment_parameters(p1: np.ndarray, d1: np.ndarray, p2: np.ndarray, d2: np.nd
     s = np.where(e > tiny, s, np.clip(-c / np.where(a > tiny, a, 1.0), 0.0, 1.0))  # the second a point
     s = np.where(a > tiny, s, 0.0)
     return s, t
+
+
+def golden_minimum(f: Callable[[np.ndarray], np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+    """The parameters ``t`` in [0, 1] ``shape`` where the convex functions ``f(t)`` (evaluated
+    elementwise on arrays of ``shape``) are smallest, by :data:`SEARCH_STEPS` steps of
+    golden-section search; an end where it is no larger than the search's point. The box and
+    the cylinder minimise their signed distance along a link with it."""
+    low, high = np.zeros(shape), np.ones(shape)
+    a, b = high - _GOLD * (high - low), low + _GOLD * (high - low)
+    fa, fb = f(a), f(b)
+    for _ in range(SEARCH_STEPS):
+        left = fa <= fb  # the minimum is in [low, b]
+        high = np.where(left, b, high)
+        low = np.where(left, low, a)
+        new = np.where(left, high - _GOLD * (high - low), low + _GOLD * (high - low))
+        fnew = f(new)
+        a, b, fa, fb = (
+            np.where(left, new, b),
+            np.where(left, a, new),
+            np.where(left, fnew, fb),
+            np.where(left, fa, fnew),
+        )
+    t = 0.5 * (low + high)
+    ends = [np.zeros(shape), np.ones(shape)]
+    best = np.argmin(np.stack([f(t), *(f(e) for e in ends)]), axis=0)
+    return np.choose(best, [t, *ends])

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._geometry import pose_columns, rpy_matrix
+from ._geometry import SEARCH_STEPS, golden_minimum, pose_columns, rpy_matrix
 from ._json import json_vector
 from .base import Obstacle, Witness, members
 
@@ -24,8 +24,6 @@ __all__ = ["BoxObstacle", "SEARCH_STEPS"]
 
 #: Golden-section steps along a capsule's axis: the bracket shrinks to 0.618^64 = 4e-14 of the
 #: axis's length, far below any clearance the package asks for.
-SEARCH_STEPS = 64
-_GOLD = (np.sqrt(5.0) - 1.0) / 2.0
 
 
 @dataclass(frozen=True)
@@ -150,29 +148,9 @@ def _signed_distance(local: np.ndarray, half: np.ndarray) -> np.ndarray:
 
 def _minimising_parameter(start: np.ndarray, direction: np.ndarray, half: np.ndarray) -> np.ndarray:
     """The parameter ``t`` in [0, 1] of the point of ``start + t direction`` where the box's
-    signed distance is smallest, by golden-section search (the function is convex in ``t``)."""
+    signed distance is smallest (:func:`~._geometry.golden_minimum`; convex in ``t``)."""
     shape = np.broadcast_shapes(start.shape, direction.shape)[:-1]
-    low, high = np.zeros(shape), np.ones(shape)
-    a, b = high - _GOLD * (high - low), low + _GOLD * (high - low)
-    fa = _signed_distance(start + a[..., None] * direction, half)
-    fb = _signed_distance(start + b[..., None] * direction, half)
-    for _ in range(SEARCH_STEPS):
-        left = fa <= fb  # the minimum is in [low, b]
-        high = np.where(left, b, high)
-        low = np.where(left, low, a)
-        new = np.where(left, high - _GOLD * (high - low), low + _GOLD * (high - low))
-        fnew = _signed_distance(start + new[..., None] * direction, half)
-        a, b, fa, fb = (
-            np.where(left, new, b),
-            np.where(left, a, new),
-            np.where(left, fnew, fb),
-            np.where(left, fa, fnew),
-        )
-    t = 0.5 * (low + high)
-    ends = [np.zeros(shape), np.ones(shape)]  # a minimum at an end: take the end itself
-    values = [_signed_distance(start + e[..., None] * direction, half) for e in (t, *ends)]
-    best = np.argmin(np.stack(values), axis=0)
-    return np.choose(best, [t, *ends])
+    return golden_minimum(lambda t: _signed_distance(start + t[..., None] * direction, half), shape)
 
 
 def _gradient(point: np.ndarray, half: np.ndarray, direction: np.ndarray, normal: np.ndarray, distance: float):

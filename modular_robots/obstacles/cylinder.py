@@ -11,16 +11,15 @@ the depth of overlapping pairs, which the optimiser's guesses need.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._geometry import pose_columns, rpy_matrix
+from ._geometry import golden_minimum, pose_columns, rpy_matrix
 from ._json import json_number, json_vector
 from .base import Obstacle, Witness, members
-from .box import SEARCH_STEPS
 
 if TYPE_CHECKING:
     import fcl
@@ -28,8 +27,6 @@ if TYPE_CHECKING:
     from .._yamlio import Fields
 
 __all__ = ["CylinderObstacle"]
-
-_GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 @dataclass(frozen=True)
@@ -112,7 +109,7 @@ class CylinderObstacle:
         local_start = np.einsum("oji,kpoj->kpoi", rotations, start - centers)  # (K, P, O, 3), cylinder frames
         local_direction = np.einsum("oji,kpoj->kpoi", rotations, np.broadcast_to(direction, local_start.shape))
         along = lambda t: _signed_distance(local_start + t[..., None] * local_direction, sizes)  # noqa: E731
-        distance = along(_golden_minimum(along, local_start.shape[:-1])) - radius[None, :, None]
+        distance = along(golden_minimum(along, local_start.shape[:-1])) - radius[None, :, None]
         return distance, distance
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
@@ -122,7 +119,7 @@ class CylinderObstacle:
         local_start = rotation.T @ (np.asarray(mid, dtype=float) - 0.5 * length * axis - center)
         local_direction = rotation.T @ (length * axis)
         along = lambda t: _signed_distance(local_start + np.asarray(t)[..., None] * local_direction, dimensions)  # noqa: E731
-        point = local_start + float(_golden_minimum(along, ())) * local_direction
+        point = local_start + float(golden_minimum(along, ())) * local_direction
         distance = float(_signed_distance(point, dimensions))
         surface, normal = _surface_and_normal(point, dimensions, local_direction)
         gradient = _gradient(point, dimensions, local_direction, normal, distance)
@@ -153,31 +150,6 @@ class CylinderObstacle:
         return [
             {"type": "cylinder", "radius": self.radius + grow, "length": self.length + 2.0 * grow, "origin": origin}
         ]
-
-
-def _golden_minimum(f: Callable[[np.ndarray], np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
-    """The parameters ``t`` in [0, 1] ``shape`` where the convex functions ``f(t)`` (evaluated
-    elementwise on arrays of ``shape``) are smallest, by :data:`~.box.SEARCH_STEPS` steps of
-    golden-section search; an end where it is no larger than the search's point."""
-    low, high = np.zeros(shape), np.ones(shape)
-    a, b = high - _GOLD * (high - low), low + _GOLD * (high - low)
-    fa, fb = f(a), f(b)
-    for _ in range(SEARCH_STEPS):
-        left = fa <= fb  # the minimum is in [low, b]
-        high = np.where(left, b, high)
-        low = np.where(left, low, a)
-        new = np.where(left, high - _GOLD * (high - low), low + _GOLD * (high - low))
-        fnew = f(new)
-        a, b, fa, fb = (
-            np.where(left, new, b),
-            np.where(left, a, new),
-            np.where(left, fnew, fb),
-            np.where(left, fa, fnew),
-        )
-    t = 0.5 * (low + high)
-    ends = [np.zeros(shape), np.ones(shape)]
-    best = np.argmin(np.stack([f(t), *(f(e) for e in ends)]), axis=0)
-    return np.choose(best, [t, *ends])
 
 
 def _signed_distance(local: np.ndarray, size: np.ndarray) -> np.ndarray:
