@@ -60,6 +60,7 @@ __all__ = [
     "make_engine",
     "available_cores",
     "max_jobs",
+    "first_ending_kept",
     "resolve_jobs",
     "Executor",
     "InProcessExecutor",
@@ -262,6 +263,21 @@ def _end_on_signal(signum, frame) -> None:
     if signum == signal.SIGINT:
         raise KeyboardInterrupt
     raise Terminated(signum)
+
+
+@contextlib.contextmanager
+def first_ending_kept() -> Iterator[None]:
+    """Within the block, a plain ``KeyboardInterrupt`` that stands for another ending signal is
+    raised as that signal's :class:`~modular_robots.exceptions.Terminated`: a library that catches
+    the exception of a signal handler may raise ``KeyboardInterrupt`` in its place (Ray's blocking
+    calls do, whatever the handler raised), and a ``SIGTERM`` would end the run as Ctrl-C."""
+    try:
+        yield
+    except KeyboardInterrupt as exc:
+        signum = _ending["signum"]
+        if isinstance(exc, Terminated) or signum in (None, signal.SIGINT):
+            raise
+        raise Terminated(signum) from exc
 
 
 def _ending_underway() -> bool:

@@ -42,7 +42,7 @@ from typing import Any
 from threadpoolctl import threadpool_limits
 
 from .exceptions import EngineError, shorten
-from .execution import CONNECT_TIMEOUT, ENDING, InProcessExecutor, Lost, _chunks, split_address
+from .execution import CONNECT_TIMEOUT, ENDING, InProcessExecutor, Lost, _chunks, first_ending_kept, split_address
 
 #: Why Ray, installed, could not be imported (said when the engine is chosen, by _require).
 _broken: Exception | None = None
@@ -421,16 +421,29 @@ class RayEngine:
             for chunk in _chunks(items, chunksize):
                 pending.append(task.remote(work, boxed, chunk))
                 if len(pending) >= cpus * self.window:
-                    yield from ray.get(pending.popleft())
+                    yield from self._next(pending)
             while pending:
-                yield from ray.get(pending.popleft())
+                yield from self._next(pending)
         finally:
             for reference in pending:
                 with contextlib.suppress(Exception):
                     ray.cancel(reference)
 
+    @staticmethod
+    def _next(pending: deque) -> list:
+        """The first chunk's results, the chunk left pending (to be cancelled) if the wait ends early."""
+        results = _get(pending[0])
+        pending.popleft()
+        return results
+
     def close(self) -> None:
         disconnect()
+
+
+def _get(references, **options):
+    """``ray.get``, keeping the ending signal that lands in it (:func:`first_ending_kept`)."""
+    with first_ending_kept():
+        return ray.get(references, **options)
 
 
 def _death(exc: Exception) -> str:
@@ -493,12 +506,12 @@ class RayExecutor:
     def advance(self, names):
         calls = {name: self._actor(name).advance.remote() for name in names}  # all at once: one round
         try:
-            out = dict(zip(calls, ray.get(list(calls.values()))))  # one wait for the whole round
+            out = dict(zip(calls, _get(list(calls.values()))))  # one wait for the whole round
         except ray.exceptions.RayActorError:
             out = {}
             for name, call in calls.items():  # which actor died, and the others' steps
                 try:
-                    out[name] = ray.get(call)
+                    out[name] = _get(call)
                 except ray.exceptions.RayActorError as exc:
                     out[name] = (True, Lost(f"its Ray actor died: {_death(exc)}"))
         for name, (ended, _) in out.items():
@@ -514,7 +527,7 @@ class RayExecutor:
                 out[name] = None
                 if name in calls:
                     with contextlib.suppress(ray.exceptions.RayActorError, ray.exceptions.GetTimeoutError):
-                        out[name] = ray.get(calls[name], timeout=STOP_SECONDS)
+                        out[name] = _get(calls[name], timeout=STOP_SECONDS)
         finally:
             for name in names:
                 self._release(name)

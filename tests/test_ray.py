@@ -23,8 +23,8 @@ from click.testing import CliRunner
 
 from modular_robots import ray_engine
 from modular_robots.cli import main
-from modular_robots.exceptions import EngineError
-from modular_robots.execution import ExecutionSettings, make_engine, make_executor
+from modular_robots.exceptions import EngineError, Terminated
+from modular_robots.execution import ExecutionSettings, make_engine, make_executor, terminations_raise
 from modular_robots.pipeline import run_scenario, with_execution
 from modular_robots.scenario import load_scenario
 
@@ -138,6 +138,22 @@ def cluster():
         yield
     finally:
         ray.shutdown()
+
+
+def _signal_the_driver(driver: list[int], chunk: list[int]) -> list[int]:
+    os.kill(driver[0], signal.SIGTERM)
+    time.sleep(30)  # the driver waits in ray.get meanwhile
+    return chunk
+
+
+def test_a_sigterm_that_lands_in_a_ray_wait_ends_as_sigterm(cluster):
+    """Ray turns whatever a signal handler raises in its blocking calls into a plain
+    ``KeyboardInterrupt``: the engine's waits keep the signal's own exception, so that a SIGTERM is
+    recorded as one (the task signals the driver while the driver waits for it)."""
+    engine = ray_engine.RayEngine()
+    with terminations_raise(), pytest.raises(Terminated) as ended:
+        list(engine.map_chunks(_signal_the_driver, [os.getpid()], [1]))
+    assert ended.value.signum == signal.SIGTERM
 
 
 def _cli_run(out: Path, *options: str) -> dict:

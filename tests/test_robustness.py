@@ -30,7 +30,8 @@ from modular_robots.__main__ import main as entry_point
 from modular_robots._yamlio import load_yaml
 from modular_robots.cli import main
 from modular_robots.collision import CULL_DISTANCE, CollisionModel, reach_bound
-from modular_robots.execution import available_cores, max_jobs, terminations_raise
+from modular_robots.exceptions import Terminated
+from modular_robots.execution import available_cores, first_ending_kept, max_jobs, terminations_raise
 from modular_robots.folder import LOCK, ResultsFolder
 from modular_robots.pipeline import run_scenario
 from modular_robots.recorder import previous_files
@@ -153,6 +154,28 @@ def test_later_signals_wait_for_the_ending_unless_its_exception_was_swallowed():
             signal.raise_signal(signal.SIGTERM)
         except KeyboardInterrupt:
             signal.raise_signal(signal.SIGHUP)  # the ending is being handled: ignored
+
+
+def _in_a_library_that_replaces_the_exception() -> None:
+    """As Ray's blocking calls do: the signal handler's exception caught, KeyboardInterrupt raised."""
+    try:
+        signal.raise_signal(signal.SIGTERM)
+    except KeyboardInterrupt:
+        raise KeyboardInterrupt from None
+
+
+def test_a_sigterm_whose_exception_a_library_replaced_still_ends_the_run_as_sigterm():
+    with terminations_raise():
+        with pytest.raises(KeyboardInterrupt) as plain:
+            _in_a_library_that_replaces_the_exception()
+        assert type(plain.value) is KeyboardInterrupt  # what the library raises
+        with pytest.raises(Terminated) as kept, first_ending_kept():
+            raise plain.value
+        assert kept.value.signum == signal.SIGTERM
+    with terminations_raise():  # a Ctrl-C stays one
+        with pytest.raises(KeyboardInterrupt) as ctrl_c, first_ending_kept():
+            signal.raise_signal(signal.SIGINT)
+        assert type(ctrl_c.value) is KeyboardInterrupt
 
 
 def _wait_until_delivered(pid: int, signum: int) -> None:
