@@ -33,7 +33,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -112,6 +112,15 @@ class FeasibilitySettings:
     escalation: int = 4
     tolerance: float = DEFAULT_TOLERANCE
     max_iterations: int = 100
+    #: False: the *relaxed* cascade, without the collision test, its IK from all
+    #: ``seeds * escalation`` seeds at once. It passes every composition the full cascade passes,
+    #: and its ``time_bound`` (the fastest pair of its solutions that pass the torque test) is at
+    #: most the full cascade's: a bound the best-first search uses before it measures collisions.
+    collision: bool = True
+
+    def relaxed(self) -> FeasibilitySettings:
+        """These settings without the collision test (see :attr:`collision`)."""
+        return replace(self, collision=False)
 
 
 @dataclass(frozen=True)
@@ -287,7 +296,7 @@ def check_compositions(
     verdicts = []
     for cascade in cascades:
         if cascade.verdict is None:
-            cascade.verdict = _feasible(cascade)
+            cascade.verdict = _feasible(cascade) if settings.collision else _relaxed(cascade)
         verdicts.append(cascade.verdict)
     return verdicts
 
@@ -381,7 +390,7 @@ def _reach_and_model(
     cascade.collision = functools.cache(
         lambda: CollisionModel(robot, task.collision_obstacles, self_collision=task.self_collision)
     )
-    cascade.seeds = ik_seeds(robot, settings.seeds)
+    cascade.seeds = ik_seeds(robot, settings.seeds if settings.collision else settings.seeds * settings.escalation)
     cascade.clock.time("model", t0)
 
 
@@ -413,7 +422,7 @@ def _at_target(cascades: list[_Cascade], label: str, end: _End, settings: Feasib
     """IK, static torque and collision at ``end`` for each of ``cascades``; one whose IK
     solutions all fail the other tests is searched again from more seeds before it fails."""
     outcomes = _solve(cascades, label, end, [c.built().seeds for c in cascades], settings)
-    if settings.escalation > 1:
+    if settings.escalation > 1 and settings.collision:  # (relaxed: every seed was used at once)
         again = [i for i, outcome in enumerate(outcomes) if outcome.solutions and not outcome.kept]
         more = [
             ik_seeds(cascades[i].built().robot, settings.seeds * settings.escalation)[settings.seeds :] for i in again
@@ -451,7 +460,10 @@ def _solve(
         )
     _share(time.perf_counter() - t0, [cascade.clock for cascade in cascades], runs)
     befores: Sequence[_TargetOutcome | None] = earlier or [None] * len(cascades)
-    return [_tests(cascade, label, found, end, before) for cascade, found, before in zip(cascades, runs, befores)]
+    return [
+        _tests(cascade, label, found, end, before, settings.collision)
+        for cascade, found, before in zip(cascades, runs, befores)
+    ]
 
 
 def _share(seconds: float, clocks: list[_Clock], runs: list[list[IKResult]]) -> None:
@@ -510,6 +522,26 @@ def _feasible(cascade: _Cascade) -> Verdict:
     )
 
 
+def _relaxed(cascade: _Cascade) -> Verdict:
+    """The verdict of a composition that passes the relaxed cascade: the fastest pair of its
+    solutions, no clear pair (nothing was measured against the obstacles)."""
+    robot = cascade.built().robot
+    q_start, q_goal = min(
+        itertools.product(cascade.passing["start"], cascade.passing["goal"]),
+        key=lambda pair: robot.travel_time_bound(*pair),
+    )
+    return Verdict(
+        cascade.composition,
+        None,
+        "feasible without the collision test",
+        cascade.figures,
+        cascade.clock.seconds,
+        tuple(map(float, q_start)),
+        tuple(map(float, q_goal)),
+        robot.travel_time_bound(q_start, q_goal),
+    )
+
+
 @dataclass
 class _TargetOutcome:
     solutions: list[np.ndarray]
@@ -522,10 +554,15 @@ class _TargetOutcome:
 
 
 def _tests(
-    cascade: _Cascade, label: str, runs: list[IKResult], end: _End, earlier: _TargetOutcome | None
+    cascade: _Cascade,
+    label: str,
+    runs: list[IKResult],
+    end: _End,
+    earlier: _TargetOutcome | None,
+    collision: bool = True,
 ) -> _TargetOutcome:
-    """Torque and collision on every distinct new solution of the IK ``runs`` (the ``earlier``
-    outcome at the same target, if any, is extended)."""
+    """Torque and (if ``collision``) collision on every distinct new solution of the IK ``runs``
+    (the ``earlier`` outcome at the same target, if any, is extended)."""
     built, clock = cascade.built(), cascade.clock
     robot = built.robot
     t0 = time.perf_counter()
@@ -547,12 +584,13 @@ def _tests(
         if not torque.passed:
             outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
             continue
-        t0 = time.perf_counter()
-        clear = _collision_check(built.collision(), q, label)
-        clock.time(COLLISION.name, t0)
-        if not clear.passed:
-            outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))
-            continue
+        if collision:
+            t0 = time.perf_counter()
+            clear = _collision_check(built.collision(), q, label)
+            clock.time(COLLISION.name, t0)
+            if not clear.passed:
+                outcome.closest = _closer(outcome.closest, (1, clear.figure, clear.message))
+                continue
         outcome.kept.append(q)
     return outcome
 

@@ -1,0 +1,177 @@
+"""Lower bounds on a composition's optimal cost from catalogue numbers alone, before step B.
+
+A best-first search (:mod:`~modular_robots.search`) checks compositions in the order of these
+bounds and stops when the smallest bound left is not below the best verified cost, so every bound
+here must be *valid*: never above the cost of any plan the pipeline can verify. Each is cheap
+(no robot model, no IK: microseconds), so that it can be evaluated for millions of compositions.
+Their proofs are in ``docs/design-notes.md`` ("Bounds before step B"); ``tests/test_bounds.py``
+checks them against the tool speeds of random motions (Pinocchio's Jacobians) and against solved
+optima.
+
+``tool speed`` (the time cost): the tool must cover the distance between the tolerated start and
+goal positions, and it cannot move faster than the sum, over the joints, of each joint's velocity
+limit times an upper bound on the tool's distance from its axis (its *lever*, from the catalogue's
+lengths by the triangle inequality; a prismatic joint moves the tool at its own speed). The other
+costs have no bound here (0): the search then orders by nothing and certifies nothing by bound.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .catalog import Catalog
+from .composition import Composition
+from .feasibility import _piece_reach, _reach_along
+from .modules import Joint
+from .plan.verification import LIMIT_TOLERANCE, TERMINAL_TOLERANCE
+from .scenario import Task
+from .urdf_assembly import RX_PI, matrix
+
+__all__ = [
+    "Lever",
+    "CatalogBound",
+    "joint_levers",
+    "tool_speed_limit",
+    "catalog_bound",
+    "TOOL_SPEED",
+    "IK_TRAVEL",
+    "JOINT_TRAVEL",
+]
+
+#: The bounds' names, as the certificate gives them: before step B (:func:`catalog_bound`), after
+#: the relaxed step B (its IK solutions' joint travel) and after step B (a candidate's problem's).
+TOOL_SPEED = "tool speed"
+IK_TRAVEL = "joint travel of the IK solutions"
+JOINT_TRAVEL = "joint travel"
+
+
+@dataclass(frozen=True)
+class Lever:
+    """A joint as the tool's speed sees it: ``prismatic`` or revolute, its velocity limit
+    [rad/s or m/s] and an upper bound on the tool's distance from its axis [m] (0 for a prismatic
+    joint, which moves the tool at its own speed)."""
+
+    prismatic: bool
+    velocity: float
+    distance: float
+
+    @property
+    def speed(self) -> float:
+        """The largest tool speed this joint alone can give [m/s]."""
+        return self.velocity if self.prismatic else self.velocity * self.distance
+
+
+@dataclass(frozen=True)
+class CatalogBound:
+    """A bound's ``name`` and ``value`` [SI] (0 where the cost has none)."""
+
+    name: str
+    value: float
+
+
+def joint_levers(composition: Composition, catalog: Catalog) -> tuple[Lever, ...]:
+    """Every joint of ``composition`` from the base to the tool, with its velocity limit and its
+    lever: the sum of the largest lengths of the rigid pieces between its axis and the tool (the
+    reach test's pieces, :func:`~modular_robots.feasibility.max_reach`, after the axis)."""
+    if catalog.general:
+        return _general_levers(composition, catalog)
+    return _simple_levers(composition, catalog)
+
+
+def _simple_levers(composition: Composition, catalog: Catalog) -> tuple[Lever, ...]:
+    """A revolute module turns about its inlet's axis: the lever is the reach of the chain after
+    it, the whole reach less the pieces before that axis (each piece's length is bounded alone, so
+    the pieces after the axis bound the distance from it to the tool)."""
+    modules = composition.modules
+    total, _, offset, strokes = _reach_along(catalog, modules)
+    reach = total + _piece_reach(offset, strokes)
+    levers = []
+    for k, module_id in enumerate(modules):
+        module = catalog.module(module_id)
+        if module.joint == "fixed":
+            continue
+        assert module.limits is not None  # a movable module has limits
+        if module.joint == "prismatic":
+            levers.append(Lever(True, module.limits.velocity, 0.0))
+        else:
+            before = _reach_along(catalog, modules[: k + 1])[0]  # the pieces up to this axis
+            levers.append(Lever(False, module.limits.velocity, max(reach - before, 0.0)))
+    return tuple(levers)
+
+
+def _general_levers(composition: Composition, catalog: Catalog) -> tuple[Lever, ...]:
+    """The rigid piece between two consecutive joint origins (or the last one and the tool) has
+    the length of the translation between them, whatever the first joint's angle (its origin is
+    on its axis), plus the stroke of a prismatic joint at its start: a revolute joint's lever is
+    the sum of the pieces after its origin (the robot model's
+    :meth:`~modular_robots.robot.RobotModel.tool_speed_bound`, from catalogue numbers)."""
+    frame, pieces, joints, stroke = _general_walk(catalog, composition.modules)
+    if joints:
+        pieces = (*pieces, float(np.linalg.norm((frame @ RX_PI)[:3, 3])) + stroke)
+    after = np.cumsum(pieces[::-1])[::-1]  # the pieces from each joint's origin to the tool
+    return tuple(
+        Lever(joint.type == "prismatic", joint.velocity, 0.0 if joint.type == "prismatic" else float(rest))
+        for joint, rest in zip(joints, after)
+    )
+
+
+@functools.lru_cache(maxsize=65536)  # assemblies share their chains but for the last modules
+def _general_walk(
+    catalog: Catalog, modules: tuple[str, ...]
+) -> tuple[np.ndarray, tuple[float, ...], tuple[Joint, ...], float]:
+    """After the chain ``modules``: the frame of its last outlet (composed with ``Rx(pi)``) in the
+    frame of its last joint (the base's before any), the pieces between consecutive joint origins,
+    the joints, and the stroke of the last joint if it is prismatic."""
+    if not modules:
+        return RX_PI, (), (), 0.0
+    frame, pieces, joints, stroke = _general_walk(catalog, modules[:-1])
+    inlet, steps, outlet = _module_frames(catalog, modules[-1])
+    frame = frame @ inlet
+    for joint, parent, child in steps:
+        if joints:
+            pieces = (*pieces, float(np.linalg.norm((frame @ parent)[:3, 3])) + stroke)
+        joints = (*joints, joint)
+        stroke = max(abs(joint.lower), abs(joint.upper)) if joint.type == "prismatic" else 0.0
+        frame = child
+    return frame @ outlet, pieces, joints, stroke
+
+
+@functools.lru_cache(maxsize=1024)
+def _module_frames(
+    catalog: Catalog, module_id: str
+) -> tuple[np.ndarray, tuple[tuple[Joint, np.ndarray, np.ndarray], ...], np.ndarray]:
+    """A module's inlet body in its inlet's frame, its joints with their parent and child poses,
+    and its outlet composed with ``Rx(pi)``, as matrices."""
+    module = catalog.general_module(module_id)
+    steps = tuple(
+        (joint, matrix(joint.parent_pose), matrix(joint.child_pose))
+        for _, joint in module.chain()[1:]
+        if joint is not None
+    )
+    return np.linalg.inv(matrix(module.inlet.pose)), steps, matrix(module.outlet.pose) @ RX_PI
+
+
+def tool_speed_limit(composition: Composition, catalog: Catalog) -> float:
+    """An upper bound on the tool's speed [m/s] of ``composition`` within its velocity limits, in
+    any configuration: the sum of :attr:`Lever.speed` (infinite if a joint has no finite limit)."""
+    speed = sum(lever.speed for lever in joint_levers(composition, catalog))
+    return float(speed) if math.isfinite(speed) else math.inf
+
+
+def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolerance: float) -> CatalogBound:
+    """The lower bound on ``composition``'s optimal cost for ``task`` before step B.
+
+    For the time cost (:data:`TOOL_SPEED`) [s]: the distance between the start and the goal less
+    both position tolerances (``task``'s, else step B's IK ``tolerance`` [m]) and verification's
+    terminal tolerance, over :func:`tool_speed_limit` raised by verification's limit tolerance.
+    For any other cost, 0 (``none``)."""
+    if task.cost != "time":
+        return CatalogBound("none", 0.0)
+    gap = math.dist(task.start, task.goal) - (task.start_tolerance or tolerance) - (task.goal_tolerance or tolerance)
+    speed = tool_speed_limit(composition, catalog) * (1.0 + LIMIT_TOLERANCE)
+    gap -= TERMINAL_TOLERANCE
+    return CatalogBound(TOOL_SPEED, max(gap, 0.0) / speed if 0.0 < speed < math.inf else 0.0)
