@@ -1,6 +1,6 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
 runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite, timor,
-engines). RESULTS.md is rewritten at the end.
+engines, search). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -19,6 +19,7 @@ from . import (
     bench_profile,
     bench_pruning,
     bench_run,
+    bench_search,
     bench_suite,
     bench_timor,
     results_md,
@@ -36,6 +37,7 @@ BENCHES = {
     "suite": bench_suite,
     "timor": bench_timor,
     "engines": bench_engines,
+    "search": bench_search,
 }
 
 with single_threaded_blas():

@@ -240,6 +240,39 @@ def _profile_lines() -> list[str]:
     return lines + [""]
 
 
+def _search_lines() -> list[str]:
+    """The best-first search against the exhaustive run (``bench_search.py``)."""
+    doc, reference = _load("search"), _load("search-reference")
+    if not doc:
+        return []
+    lines = [
+        "## Best-first search (`run --search best-first`)",
+        "",
+        _measured(doc)
+        + f" Load average {doc['load_average_before']:.1f} before, {doc['load_average_after']:.1f} after."
+        + (f" Exhaustive reference runs: commit `{reference['commit']}`." if reference else ""),
+        "",
+        "| scenario | space | wall s | step B s (relaxed / whole checked) | steps C+D s | candidates | winner | "
+        "cost | certified | gap | ratio-pruned | exhaustive winner, wall s | first estimate of step B s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in doc["rows"]:
+        same = "same" if r["same_winner"] else ("-" if r["same_winner"] is None else f"**{r['exhaustive_winner']}**")
+        estimate = (
+            "-"
+            if r["first_estimate_step_b_s"] is None
+            else f"{r['first_estimate_step_b_s']:.0f} (at {r['first_estimate_at_s']:.0f} s)"
+        )
+        lines.append(
+            f"| {r['scenario']} | {r['space']:,} | {_fmt(r['wall_s'])} | {_fmt(r['step_b_s'])} "
+            f"({r['step_b_relaxed']:,} / {r['step_b_checked']:,}) | {_fmt(r['steps_cd_s'])} | {r['candidates']} | "
+            f"{r['winner']} | {r['cost']:.4f} | {'yes' if r['certified'] else 'no'} | "
+            f"{'-' if r['gap'] is None else format(r['gap'], '.3g')} | {r['ratio_pruned']} | {same}, "
+            f"{_fmt(r['exhaustive_wall_s']) if r['exhaustive_wall_s'] else '-'} | {estimate} |"
+        )
+    return lines + [""]
+
+
 def _engines_lines() -> list[str]:
     """The engines side by side (``bench_engines.py``)."""
     doc = _load("engines")
@@ -459,6 +492,7 @@ def build() -> str:
                 )
         lines.append("")
     lines += _suite_lines()
+    lines += _search_lines()
     lines += _engines_lines()
     margins = _load("margins")
     if margins:

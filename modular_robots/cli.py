@@ -50,6 +50,7 @@ from .folder import LOCK, atomic_write, check_writable
 from .pipeline import optimize_composition, run_scenario, with_execution, with_pruning
 from .report import RESULT, WINNER_FILES, export_controller_rate, is_export
 from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
+from .search import SEARCHES, SearchSettings, search_scenario
 from .timor import import_timor
 from .urdf import write_urdf
 from .verdicts import VerdictFile, lock_path
@@ -374,6 +375,21 @@ def optimize_command(
     default=None,
     help="Override the ratio rule's threshold.",
 )
+@click.option(
+    "--search",
+    type=click.Choice(SEARCHES),
+    default="all",
+    show_default=True,
+    help="all: step B on every composition, then step C (the paper's); best-first: bounds first, step B "
+    "only where a bound leaves a chance, resumable, with a certificate (docs/search.md).",
+)
+@click.option(
+    "--budget",
+    type=Number(0.0, 1e9, positive=True),
+    default=None,
+    help="With --search best-first: end after this many seconds with the best verified robot and its gap "
+    "(run again into the same folder to go on).",
+)
 @jobs_option
 @engine_option
 @address_option
@@ -384,12 +400,16 @@ def run_command(
     out: Path | None,
     rule: str | None,
     threshold: float | None,
+    search: str,
+    budget: float | None,
     jobs: int,
     engine: str | None,
     address: str | None,
     max_compositions: int,
 ) -> None:
     """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
+    if budget is not None and search != "best-first":
+        raise click.BadParameter("a budget ends a best-first search; add --search best-first", param_hint="--budget")
     scenario = _execution(with_pruning(load_scenario(scenario_path), rule, threshold), engine, address)
     if threshold is not None and scenario.pruning.rule == "none":
         click.echo(f"warning: --threshold {threshold:g} has no effect: the rule none never prunes", err=True)
@@ -399,6 +419,9 @@ def run_command(
         _scenario_files("SCENARIO", scenario_path, scenario.catalog),
         "a results folder apart from the scenario and its catalogue",
     )
+    if search == "best-first":
+        _search(scenario, out, jobs, budget)
+        return
     _space(scenario, make_engine(jobs, scenario.execution).jobs, max_compositions)
     click.echo(
         f"{scenario.name}: rule {scenario.pruning.rule}"
@@ -434,6 +457,35 @@ def run_command(
         result = run_scenario(scenario, out, jobs, on_progress=progress, max_compositions=max_compositions)
     click.echo(run_table(result, scenario))
     click.echo(f"wrote {written_files(out)}")
+
+
+def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
+    """``run --search best-first``: the search with its progress on one line, then the summary."""
+    space = sum(count_compositions(scenario.catalog).values())
+    click.echo(
+        f"{scenario.name}: best-first search of {space:,} compositions, rule {scenario.pruning.rule}"
+        + (f", budget {budget:g} s" if budget is not None else "")
+        + f"; results in {out}",
+        err=True,
+    )
+    with LiveLine() as live:
+
+        def progress(stage, f):
+            best = "-" if f["best"] is None else f"{f['best']:.4g}"
+            lowest = "-" if f["lowest_bound"] is None else f"{f['lowest_bound']:.4g}"
+            live.show(
+                f"search: {f['checked']:,} of {f['space']:,} compositions settled, {f['candidates']} candidates "
+                f"optimised, best verified {best}, smallest bound left {lowest}{_eta(f)}"
+            )
+
+        result = search_scenario(scenario, out, jobs, SearchSettings(budget=budget), on_progress=progress)
+    click.echo(run_table(result, scenario))
+    click.echo(f"wrote {written_files(out)}")
+
+
+def _eta(figures: dict) -> str:
+    seconds = figures.get("eta")
+    return "" if seconds is None else f", at most about {seconds:.0f} s of step B left"
 
 
 @main.command("export")

@@ -88,6 +88,10 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
+#: The name the incumbent cost goes by among the converged candidates (no candidate's: names are
+#: never empty).
+INCUMBENT = ""
+
 #: Largest scaled constraint violation of an iterate trusted as the pruning reference.
 GUARD_VIOLATION = 1e-3
 
@@ -248,6 +252,9 @@ class PruningManager:
     floor: dict[str, float] = field(default_factory=dict)
     #: Lower bounds of the candidates' costs known before they start (for admission by bound).
     bounds: Mapping[str, float] = field(default_factory=dict)
+    #: The best verified cost of candidates outside this manager (an earlier batch of a search),
+    #: None if none: a reference from the first round, as if one of these had converged to it.
+    incumbent: float | None = None
 
     def rounds(self) -> Iterator[Progress]:
         order = self.executor.names()
@@ -256,7 +263,7 @@ class PruningManager:
         # most ``admit`` at a time, so that a verified cost can drop the others before they start.
         waiting = deque(sorted(order, key=lambda n: self.bounds.get(n, 0.0)) if admit else [])
         alive = [] if admit else list(order)
-        converged: dict[str, float] = {}
+        converged: dict[str, float] = {} if self.incumbent is None else {INCUMBENT: self.incumbent}
         round_ = 0
         try:
             while True:

@@ -73,6 +73,8 @@ class RunRecorder:
         self.seconds: dict[str, float] = {}
         self.results: list[CandidateResult] = []
         self.winner: dict | None = None
+        #: A search's progress and certificate (``run --search best-first``), None for a plain run.
+        self.search: dict | None = None
         self._start = time.perf_counter()
         self._last_write = -float("inf")
 
@@ -107,10 +109,14 @@ class RunRecorder:
         counts: dict | None = None,
         seconds: dict | None = None,
         results: Sequence[CandidateResult] | None = None,
+        search: dict | None = None,
         every: float = 0.0,
     ) -> None:
-        """Merge stage ``counts`` and ``seconds``, replace the candidate ``results``, and rewrite the
-        document unless it was written less than ``every`` seconds ago."""
+        """Merge stage ``counts`` and ``seconds``, replace the candidate ``results`` and the
+        ``search`` block, and rewrite the document unless it was written less than ``every``
+        seconds ago."""
+        if search is not None:
+            self.search = search
         self.counts.update(counts or {})
         self.seconds.update(seconds or {})
         if results is not None:
@@ -190,6 +196,7 @@ class RunRecorder:
             winner=self.winner,
             wall_seconds=time.perf_counter() - self._start,
             short=short,
+            search=self.search,
         )
 
     def summary(self) -> dict:

@@ -219,10 +219,12 @@ def result_json(
     winner: dict | None,
     wall_seconds: float,
     short: bool = False,
+    search: dict | None = None,
 ) -> dict:
     """The whole document; ``partial`` is true while the run goes on and for an interrupted one.
-    ``short``: the candidates in their short form (:func:`candidate_summary_json`)."""
-    return {
+    ``short``: the candidates in their short form (:func:`candidate_summary_json`). ``search``: a
+    best-first search's block (its progress and certificate), written when given."""
+    document = {
         "scenario": scenario.name,
         "scenario_file": str(scenario.path) if scenario.path else None,
         "status": status,
@@ -239,6 +241,9 @@ def result_json(
             "wall_seconds": round(wall_seconds, 3),
         },
     }
+    if search is not None:
+        document["search"] = search
+    return document
 
 
 def result_text(document: dict, allow_nan: bool = False) -> str:

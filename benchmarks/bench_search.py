@@ -1,0 +1,101 @@
+"""The best-first search end to end (``run --search best-first`` as a whole process) against the
+exhaustive run's winner: on paper-5kg and on the 32,768 IMPROV assemblies of
+``scenarios/improv-science2019-pick.yaml``.
+
+The exhaustive runs take long (tens of minutes for the IMPROV space on 2 cores), so they are run
+once, by ``python -m benchmarks.bench_search --reference``, and committed as
+``benchmarks/results/search-reference.json`` with their times; ``make bench`` runs the searches
+and checks their winners against it. The search's first estimate of the step B still ahead, and
+the step B it then took, are recorded beside each other.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ._common import RESULTS, commit, machine, table, write
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = [ROOT / "scenarios" / "paper-5kg.yaml", ROOT / "scenarios" / "improv-science2019-pick.yaml"]
+REFERENCE = RESULTS / "search-reference.json"
+
+
+def _run(scenario: Path, out: Path, *options: str) -> tuple[float, dict]:
+    command = [sys.executable, "-m", "modular_robots", "run", str(scenario), "--out", str(out), *options]
+    start = time.perf_counter()
+    subprocess.run(command, cwd=ROOT, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - start, json.loads((out / "result.json").read_text())
+
+
+def reference() -> None:
+    """The exhaustive runs (``--search all``), written to :data:`REFERENCE`."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for scenario in SCENARIOS:
+            wall, document = _run(scenario, Path(tmp) / scenario.stem)
+            rows.append(
+                {
+                    "scenario": scenario.stem,
+                    "wall_s": wall,
+                    "step_b_s": document["seconds"]["feasibility"],
+                    "steps_cd_s": document["seconds"]["optimization"],
+                    "winner": document["winner"]["composition"],
+                    "cost": document["winner"]["cost"],
+                    "feasible": document["counts"]["feasible"],
+                    "candidates": document["counts"]["candidates"],
+                }
+            )
+            print(table(rows[-1:]))
+    REFERENCE.write_text(
+        json.dumps(
+            {"commit": commit(), "machine": machine(), "load_average": os.getloadavg()[0], "rows": rows}, indent=2
+        )
+        + "\n"
+    )
+
+
+def main() -> None:
+    references = {r["scenario"]: r for r in json.loads(REFERENCE.read_text())["rows"]} if REFERENCE.exists() else {}
+    rows = []
+    load_before = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        for scenario in SCENARIOS:
+            wall, document = _run(scenario, Path(tmp) / scenario.stem, "--search", "best-first")
+            search, seconds = document["search"], document["seconds"]
+            certificate = search["certificate"]
+            expected = references.get(scenario.stem, {})
+            estimate = search.get("first_estimate") or {}
+            rows.append(
+                {
+                    "scenario": scenario.stem,
+                    "space": certificate["space"],
+                    "wall_s": wall,
+                    "step_b_s": seconds["feasibility"],
+                    "steps_cd_s": seconds["optimization"],
+                    "step_b_checked": search["progress"]["step_b"],
+                    "step_b_relaxed": search["progress"]["step_b_relaxed"],
+                    "candidates": search["progress"]["candidates"],
+                    "winner": document["winner"]["composition"],
+                    "cost": document["winner"]["cost"],
+                    "certified": certificate["certified_optimal"],
+                    "gap": certificate["gap"],
+                    "ratio_pruned": certificate["pruned_by_ratio"],
+                    "exhaustive_winner": expected.get("winner"),
+                    "same_winner": expected.get("winner") == document["winner"]["composition"] if expected else None,
+                    "exhaustive_wall_s": expected.get("wall_s"),
+                    "first_estimate_at_s": estimate.get("at_s"),
+                    "first_estimate_step_b_s": estimate.get("step_b_left_s"),
+                }
+            )
+    print(table(rows))
+    write("search", rows, {"load_average_before": load_before, "load_average_after": os.getloadavg()[0]})
+
+
+if __name__ == "__main__":
+    reference() if "--reference" in sys.argv[1:] else main()

@@ -1,0 +1,563 @@
+"""A best-first search over a catalogue's compositions that proves its answer (``run --search
+best-first``): lower bounds first, step B only where a bound leaves a chance, and a
+:class:`~modular_robots.certificate.Certificate` of what was excluded and why.
+
+Every composition enters a frontier ordered by a lower bound on its optimal cost, which each
+stage it passes raises:
+
+0. from catalogue numbers alone (:func:`~modular_robots.bounds.catalog_bound`, microseconds);
+1. after the *relaxed* step B (reach, workspace, IK from every seed step B may use, static torque;
+   no collision, :meth:`~modular_robots.feasibility.FeasibilitySettings.relaxed`): the joint
+   travel time of the fastest pair of its solutions, at most that of any pair step B can keep;
+2. after step B itself, per candidate: the bound its problem has
+   (:func:`~modular_robots.pipeline.cost_bound`).
+
+The frontier holds one queue per stage. Each step takes from every queue the items of smallest
+bound that are still below the best verified cost (a batch of each; candidates first, so that a
+cost verified in the step lets the others skip what it excludes), advances them one stage
+(stages 0 and 1 on the engine's workers, candidates in the lockstep of
+:class:`~modular_robots.pruning.PruningManager` with the best verified cost so far as its
+incumbent) and puts back what passes with its new bound. Taking from every stage at each step
+makes the search *anytime*: candidates are optimised from the first steps on, however many
+compositions still wait for stage 0 (a stage-0 bound is far below the stage-1 bound of the same
+composition, so one queue in bound order would run the relaxed step B on the whole space before
+any candidate). The search ends when the smallest bound left is not below the best verified cost
+(the winner is then the best of everything the bounds did not exclude), when nothing is left, or
+at the budget.
+
+What each step found is appended to ``search.jsonl`` in the results folder as it comes (its first
+line says which scenario and settings it is of). Run again into that folder, the search reads it
+back and replays the same steps without redoing their work, so it ends as an uninterrupted run
+would; the steps are deterministic (step B's verdicts and each candidate's iterates do not depend
+on the engine or the number of workers).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import heapq
+import json
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import IO
+
+from .bounds import IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, catalog_bound, joint_levers
+from .certificate import Certificate, Ledger
+from .composition import Composition, enumerate_compositions
+from .exceptions import InfeasibleError, InputError, shorten
+from .execution import Engine, make_engine, make_executor
+from .feasibility import (
+    FeasibilitySettings,
+    FeasibilitySummary,
+    Verdict,
+    check_compositions,
+    composition_space,
+)
+from .ocp.candidate import CandidateSpec, make_candidate
+from .pipeline import RunResult, candidate_specs, cost_bound, track_winner, winner_approach
+from .plan.boundary import BoundaryPair
+from .plan.candidate import CandidateResult, CandidateStatus
+from .plan.document import status_counts
+from .plan.verification import LIMIT_TOLERANCE
+from .pruning import PruningManager
+from .recorder import RunRecorder
+from .scenario import Scenario
+from .verdicts import verdict_from_json
+
+__all__ = ["SearchSettings", "SearchResult", "search_scenario", "STATE", "SEARCHES"]
+
+logger = logging.getLogger(__name__)
+
+#: ``run --search``: every composition through step B (the paper's pipeline), or this search.
+SEARCHES = ("all", "best-first")
+#: The search's record in the results folder.
+STATE = "search.jsonl"
+#: The ``search`` version of its first line.
+FORMAT = 1
+#: Configurations step B keeps as one when within this distance (max norm) [rad | m]
+#: (:func:`~modular_robots.ik.distinct`): the relaxed and the full cascade may keep different
+#: members of such a cluster (each end can move by this), so the stage-1 bound is lowered by
+#: twice this over the slowest joint's limit.
+_CLUSTER = 1e-3
+
+#: Frontier kinds: a composition not checked yet, one through the relaxed step B, a candidate.
+_UNCHECKED, _RELAXED, _CANDIDATE = 0, 1, 2
+_BOUND_NAME = {_UNCHECKED: TOOL_SPEED, _RELAXED: IK_TRAVEL, _CANDIDATE: JOINT_TRAVEL}
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """``budget``: wall seconds after which the search ends with the best verified robot and its
+    gap (None: no limit). ``batch``: compositions advanced per step through each stage of step B
+    (None: 32 per worker); ``candidates``: candidates optimised per step.
+    ``frontier``: compositions held at once; a larger space is taken in passes of this many, in
+    the order of their catalogue bounds (bounded memory)."""
+
+    budget: float | None = None
+    batch: int | None = None
+    candidates: int = 16
+    frontier: int = 500_000
+
+
+@dataclass(frozen=True)
+class SearchResult(RunResult):
+    """:class:`~modular_robots.pipeline.RunResult` with the search's certificate."""
+
+    certificate: Certificate = field(default_factory=Certificate)
+
+
+@dataclass(order=True)
+class _Item:
+    bound: float
+    order: tuple
+    kind: int = field(compare=False)
+    composition: Composition = field(compare=False)
+    spec: CandidateSpec | None = field(default=None, compare=False)
+
+
+def search_scenario(
+    scenario: Scenario,
+    out: str | Path | None = None,
+    jobs: int | None = None,
+    settings: SearchSettings = SearchSettings(),
+    feasibility: FeasibilitySettings = FeasibilitySettings(),
+    on_progress: Callable[[str, dict], None] | None = None,
+    max_compositions: int | None = None,
+) -> SearchResult:
+    """The best composition of ``scenario`` by best-first search, its plan, the results folder
+    (with ``search.jsonl``, resumed if it is there) and the certificate (in ``result.json``).
+
+    Parameters are those of :func:`~modular_robots.pipeline.run_scenario`, and ``settings``.
+    ``on_progress`` is called with ``("search", figures)`` after every step. ``max_compositions``
+    (default: none) refuses a larger space before any work.
+
+    Raises
+    ------
+    InfeasibleError
+        If no composition verifies (every one removed by step B, or every candidate failed) and the
+        search ended; ``result.json`` then says why.
+    """
+    notify = on_progress or (lambda stage, figures: None)
+    engine = make_engine(jobs, scenario.execution)
+    try:
+        return _Search(scenario, out, engine, settings, feasibility, notify, max_compositions).run()
+    finally:
+        engine.close()
+
+
+class _Search:
+    def __init__(self, scenario, out, engine: Engine, settings, feasibility, notify, max_compositions):
+        self.scenario, self.out, self.engine = scenario, out, engine
+        self.settings, self.feasibility, self.notify = settings, feasibility, notify
+        self.space = composition_space(scenario.catalog, max_compositions or 2**62, engine.jobs)
+        self.batch = settings.batch or 32 * max(engine.jobs, 1)
+        self.tolerance = feasibility.tolerance
+        self.ledger = Ledger(self.space)
+        self.summary = FeasibilitySummary()
+        self.results: dict[str, CandidateResult] = {}
+        self.specs: dict[str, CandidateSpec] = {}
+        self.best: CandidateResult | None = None
+        self.queues: dict[int, list[_Item]] = {_UNCHECKED: [], _RELAXED: [], _CANDIDATE: []}
+        self.passed = 0  # compositions of the space taken into the frontier so far
+        self.beyond: tuple[int, float] = (0, math.inf)  # the rest: how many, their smallest bound
+        self.seconds = {"search": 0.0, "feasibility": 0.0, "optimization": 0.0}
+        self.log = _Log(out, scenario, feasibility, self.batch)
+        self.certificate: dict | None = None
+        self.unchecked = 0  # compositions in the frontier not through any step B yet
+        self.relaxed_cpu = [0, 0.0]  # compositions through the relaxed step B here, their CPU seconds
+        self.rounds = 0
+        self.stage_counts = {_UNCHECKED: 0, _RELAXED: 0}  # compositions through each step B
+        self.first_estimate: dict | None = None
+
+    # -- the loop ---------------------------------------------------------------------------------
+    def run(self) -> SearchResult:
+        start = time.perf_counter()
+        deadline = math.inf if self.settings.budget is None else start + self.settings.budget
+        with (
+            RunRecorder(
+                self.out,
+                self.scenario,
+                jobs=self.engine.jobs,
+                engine=self.scenario.execution.engine,
+                search="best-first",
+            ) as recorder,
+            self.log,
+        ):
+            self.recorder = recorder
+            self._take_pass(after=None)
+            ended = "certified"
+            while True:
+                self.seconds["search"] = time.perf_counter() - start
+                self._record()
+                if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._best_cost():
+                    self._take_pass(after=self.last_key)
+                lowest = self._lowest()
+                if lowest is None:
+                    ended = "exhausted"
+                    break
+                if lowest >= self._best_cost():
+                    break
+                if time.perf_counter() >= deadline:
+                    ended = "budget"
+                    break
+                self._step()
+            certificate = self._certificate(ended)
+            self.certificate = certificate.to_json()
+            self._record()
+            return self._finish(recorder, certificate, start)
+
+    def _best_cost(self) -> float:
+        return self.best.cost if self.best is not None else math.inf
+
+    def _lowest(self) -> float | None:
+        """The smallest bound left (None: nothing is left)."""
+        tops = [queue[0].bound for queue in self.queues.values() if queue]
+        if self.beyond[0]:
+            tops.append(self.beyond[1])
+        return min(tops, default=None)
+
+    def _take(self, kind: int, count: int) -> list[_Item]:
+        queue, taken = self.queues[kind], list[_Item]()
+        while queue and len(taken) < count and queue[0].bound < self._best_cost():
+            taken.append(heapq.heappop(queue))
+        return taken
+
+    def _step(self) -> None:
+        candidates = self._take(_CANDIDATE, self.settings.candidates)
+        if candidates:
+            t0 = time.perf_counter()
+            self._optimise(candidates)
+            self.seconds["optimization"] += time.perf_counter() - t0
+        checks = self._take(_RELAXED, self.batch) + self._take(_UNCHECKED, self.batch)
+        self.unchecked -= sum(item.kind == _UNCHECKED for item in checks)
+        if checks:
+            t0 = time.perf_counter()
+            self._check(checks)
+            self.seconds["feasibility"] += time.perf_counter() - t0
+
+    # -- stage 0: the catalogue bounds --------------------------------------------------------------
+    def _take_pass(self, after: tuple | None) -> None:
+        """Put into the frontier the ``frontier`` compositions of smallest catalogue bound after
+        the key ``after`` (all of them when the space is small enough)."""
+        keep = self.settings.frontier
+        kept: list[tuple[float, int, Composition]] = []  # a max-heap by key: (-bound, -index)
+        beyond, smallest = 0, math.inf
+        for index, composition in enumerate(enumerate_compositions(self.scenario.catalog)):
+            bound = catalog_bound(composition, self.scenario.catalog, self.scenario.task, self.tolerance).value
+            key = (bound, index)
+            if after is not None and key <= after:
+                continue
+            if len(kept) < keep:
+                heapq.heappush(kept, (-bound, -index, composition))
+            elif key < (-kept[0][0], -kept[0][1]):
+                dropped = heapq.heapreplace(kept, (-bound, -index, composition))
+                beyond, smallest = beyond + 1, min(smallest, -dropped[0])
+            else:
+                beyond, smallest = beyond + 1, min(smallest, bound)
+        queue = self.queues[_UNCHECKED]
+        for negative, index, composition in kept:
+            queue.append(_Item(-negative, (-negative, -index), _UNCHECKED, composition))
+        heapq.heapify(queue)
+        self.last_key = max(((-negative, -index) for negative, index, _ in kept), default=after)
+        self.beyond = (beyond, smallest)
+        self.passed += len(kept)
+        self.unchecked += len(kept)
+
+    # -- stages 1 and 2: step B, relaxed then whole -------------------------------------------------
+    def _check(self, items: list[_Item]) -> None:
+        todo: dict[int, list[Composition]] = {_UNCHECKED: [], _RELAXED: []}
+        found: dict[tuple[int, str], Verdict] = {}
+        for item in items:
+            cached = self.log.verdict(item.kind, item.composition)
+            if cached is None:
+                todo[item.kind].append(item.composition)
+            else:
+                found[item.kind, item.composition.name] = cached
+        for kind, compositions in todo.items():
+            if compositions:
+                settings = self.feasibility.relaxed() if kind == _UNCHECKED else self.feasibility
+                context = (self.scenario.catalog, self.scenario.task, settings)
+                for verdict in self.engine.map_chunks(_check_chunk, context, compositions, chunksize=8):
+                    found[kind, verdict.composition.name] = verdict
+                    self.log.write_verdict(kind, verdict)
+                    if kind == _UNCHECKED:
+                        self.relaxed_cpu[0] += 1
+                        self.relaxed_cpu[1] += sum(verdict.seconds.values())
+        for item in items:
+            verdict = found[item.kind, item.composition.name]
+            self.stage_counts[item.kind] += 1
+            if not verdict.passed:
+                self.summary.add(verdict)
+                self.ledger.removed(item.composition.name, verdict.failed_test or "")
+            elif item.kind == _UNCHECKED:
+                bound = max(item.bound, self._ik_bound(verdict))
+                heapq.heappush(
+                    self.queues[_RELAXED], _Item(bound, (bound, *item.order[1:]), _RELAXED, item.composition)
+                )
+            else:
+                self.summary.add(verdict)
+                for spec in candidate_specs([verdict]):
+                    bound = max(item.bound, cost_bound(self.scenario, spec))
+                    self.specs[spec.name] = spec
+                    order = (bound, *item.order[1:], spec.name)
+                    heapq.heappush(self.queues[_CANDIDATE], _Item(bound, order, _CANDIDATE, item.composition, spec))
+
+    def _ik_bound(self, verdict: Verdict) -> float:
+        """The stage-1 bound of a composition through the relaxed step B: the joint travel time
+        of its fastest pair (:attr:`Verdict.time_bound`), less what the clusters' members may
+        differ by, within the limits verification allows (none for another cost than time, or
+        with free ends: step C then chooses its own ends)."""
+        if self.scenario.task.cost != "time" or self.scenario.optimizer.free_ends or verdict.time_bound is None:
+            return 0.0
+        limits = [lever.velocity for lever in joint_levers(verdict.composition, self.scenario.catalog)]
+        slowest = min((v for v in limits if 0.0 < v < math.inf), default=math.inf)
+        return max(verdict.time_bound - 2 * _CLUSTER / slowest, 0.0) / (1.0 + LIMIT_TOLERANCE)
+
+    # -- stage 3: step C ------------------------------------------------------------------------------
+    def _optimise(self, items: list[_Item]) -> None:
+        names = [item.spec.name for item in items if item.spec is not None]
+        specs = [self.specs[name] for name in names]
+        bounds = {item.spec.name: item.bound for item in items if item.spec is not None}
+        cached = self.log.batch(names)
+        if cached is None:
+            executor = make_executor(
+                make_candidate, self.scenario, specs, names, self.engine.jobs, self.scenario.execution
+            )
+            incumbent = self.best.cost if self.best is not None else None
+            manager = PruningManager(executor, self.scenario.pruning, bounds=bounds, incumbent=incumbent)
+            try:
+                for _ in manager.rounds():
+                    self.rounds += 1
+                    self._record(every=1.0)
+            finally:
+                executor.shutdown()
+            results = [_labelled(manager.results[name], spec) for name, spec in zip(names, specs)]
+            self.log.write_batch(names, results)
+        else:
+            results = cached
+        for result in results:
+            self.results[result.name] = result
+            self.ledger.candidate(result, bounds[result.name])
+            if result.status == CandidateStatus.OPTIMAL and (
+                self.best is None or (result.cost, result.name) < (self.best.cost, self.best.name)
+            ):
+                self.best = result
+
+    # -- the end ---------------------------------------------------------------------------------
+    def _certificate(self, ended: str) -> Certificate:
+        best = self._best_cost()
+        for item in (item for queue in self.queues.values() for item in queue):
+            self.ledger.left(item.composition.name, item.bound, _BOUND_NAME[item.kind], best)
+        if self.beyond[0]:
+            self.ledger.beyond(self.beyond[0], self.beyond[1], TOOL_SPEED, best)
+        return self.ledger.certificate(self.best.composition if self.best else None, best, ended)
+
+    def _finish(self, recorder: RunRecorder, certificate: Certificate, start: float) -> SearchResult:
+        results = self._ranked()
+        recorder.update(results=results, counts=status_counts(results))
+        if self.best is None:
+            if certificate.ended == "budget":
+                message = "no composition verified within the budget (run again into this folder to go on); "
+                recorder.finish("failed", message + certificate.line())
+            else:
+                message = "no composition verified; "
+                recorder.finish("infeasible" if not results else "failed", message + certificate.line())
+            raise InfeasibleError(message + certificate.line())
+        winner = self.best
+        if winner.trajectory is None:  # found in an earlier session: solved again (deterministic)
+            winner = _solve(self.scenario, self.specs[winner.name], winner)
+            self.best = winner
+        recorder.record_winner(
+            winner,
+            f"{self.scenario.name}: best-first search",
+            track_winner(winner),
+            winner_approach(winner, self.scenario),
+        )
+        recorder.finish("done", certificate.line())
+        self.seconds["search"] = time.perf_counter() - start
+        return SearchResult(tuple(self._ranked()), winner, self.summary, self.rounds, dict(self.seconds), certificate)
+
+    def _ranked(self) -> list[CandidateResult]:
+        results = dict(self.results)
+        if self.best is not None:
+            results[self.best.name] = self.best
+        return sorted(results.values(), key=lambda r: (r.status != CandidateStatus.OPTIMAL, r.cost, r.name))
+
+    def _eta(self) -> float | None:
+        """An upper estimate of the wall seconds of the relaxed step B still ahead [s]: every
+        composition not through it yet, at the CPU seconds each has taken so far (None before any
+        was measured). The search usually ends long before: a bound stops it."""
+        done, seconds = self.relaxed_cpu
+        if not done:
+            return None
+        left = self.unchecked + (self.space - self.passed)
+        return left * seconds / done / max(self.engine.jobs, 1)
+
+    def _record(self, every: float = 0.0) -> None:
+        eta = self._eta()
+        figures = {
+            "space": self.space,
+            "checked": self.ledger.checked,
+            "step_b_relaxed": self.stage_counts[_UNCHECKED],
+            "step_b": self.stage_counts[_RELAXED],
+            "candidates": len(self.results),
+            "waiting": {
+                "step_b_relaxed": self.unchecked + self.space - self.passed,
+                "step_b": len(self.queues[_RELAXED]),
+                "step_c": len(self.queues[_CANDIDATE]),
+            },
+            "lowest_bound": self._lowest(),
+            "best": self.best.cost if self.best is not None else None,
+            "eta": eta,
+        }
+        if self.first_estimate is None and eta is not None:
+            self.first_estimate = {"at_s": round(self.seconds["search"], 3), "step_b_left_s": round(eta, 3)}
+        block = {"progress": figures, "first_estimate": self.first_estimate, "certificate": self.certificate}
+        self.recorder.update(search=block, seconds=self.seconds, every=every)
+        self.notify("search", figures)
+
+
+def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
+    catalog, task, settings = context
+    return check_compositions(chunk, catalog, task, settings)
+
+
+def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
+    if result.composition:
+        return result
+    return replace(result, composition=spec.composition.name, boundary_pair=spec.boundary_pair)
+
+
+def _solve(scenario: Scenario, spec: CandidateSpec, expected: CandidateResult) -> CandidateResult:
+    """``spec``'s candidate solved again in this process: the plan of a winner found before a stop."""
+    candidate = make_candidate(scenario, spec)
+    for _ in candidate.iterate():
+        pass
+    result = candidate.result
+    assert result is not None
+    if result.status != CandidateStatus.OPTIMAL or not math.isclose(result.cost, expected.cost, rel_tol=1e-9):
+        raise InfeasibleError(
+            f"{spec.name}: solved again after a stop, it ended {result.status} at {result.cost:.6g}, not at the "
+            f"recorded {expected.cost:.6g}; remove {STATE} from the results folder and run again"
+        )
+    return result
+
+
+# -- the record of the search ------------------------------------------------------------------------
+_SUMMARY_FIELDS = (
+    "name",
+    "dof",
+    "status",
+    "reason",
+    "iterations",
+    "seconds",
+    "cost",
+    "tf",
+    "constraint_violation",
+    "cost_history",
+    "violation_history",
+    "refinement_history",
+    "substeps",
+    "pruned_at_iteration",
+    "cost_bound",
+    "composition",
+    "boundary_pair",
+    "q_start",
+    "q_goal",
+)
+
+
+def _result_json(result: CandidateResult) -> dict:
+    return {name: getattr(result, name) for name in _SUMMARY_FIELDS}
+
+
+def _result_from_json(document: dict) -> CandidateResult:
+    values = {name: document[name] for name in _SUMMARY_FIELDS}
+    for name in ("cost_history", "violation_history", "refinement_history", "q_start", "q_goal"):
+        values[name] = tuple(values[name])
+    values["status"] = CandidateStatus(values["status"])
+    values["boundary_pair"] = BoundaryPair(values["boundary_pair"])
+    return CandidateResult(**values)
+
+
+class _Log:
+    """``search.jsonl``: what each step found, appended and flushed as it comes; read back when
+    the search starts in a folder that has it (of the same scenario and settings)."""
+
+    def __init__(self, out, scenario: Scenario, feasibility: FeasibilitySettings, batch: int):
+        self.path = Path(out) / STATE if out is not None else None
+        text = repr((scenario.catalog, scenario.task, scenario.optimizer, scenario.pruning, feasibility, batch))
+        self.fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
+        self.scenario = scenario
+        self.verdicts: dict[tuple[int, str], dict] = {}
+        self.batches: dict[tuple[str, ...], list[dict]] = {}
+        self.file: IO[str] | None = None
+
+    def __enter__(self) -> _Log:
+        if self.path is None:
+            return self
+        if self.path.exists():
+            self._read()
+            self.file = open(self.path, "a", encoding="utf-8")
+        else:
+            self.file = open(self.path, "x", encoding="utf-8")
+            self._write({"search": FORMAT, "fingerprint": self.fingerprint, "scenario": self.scenario.name})
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.file is not None:
+            self.file.close()
+
+    def _read(self) -> None:
+        assert self.path is not None
+        with open(self.path, encoding="utf-8") as file:
+            lines = file.read().split("\n")
+        if lines and lines[-1]:  # a last line cut short by a stop
+            lines = lines[:-1]
+            with open(self.path, "r+", encoding="utf-8") as file:
+                file.truncate(sum(len(line.encode()) + 1 for line in lines))
+        try:
+            header = json.loads(lines[0]) if lines and lines[0] else {}
+        except ValueError:
+            header = {}
+        if header.get("search") != FORMAT or header.get("fingerprint") != self.fingerprint:
+            raise InputError(
+                f"{shorten(self.path, 200, quote=False)}: not the record of a search of this scenario with these "
+                "settings; remove it to start afresh, or choose another folder (--out)"
+            )
+        for number, line in enumerate(lines[1:], start=2):
+            if not line:
+                continue
+            try:
+                entry = json.loads(line)
+                if "batch" in entry:
+                    self.batches[tuple(entry["batch"])] = entry["results"]
+                else:
+                    self.verdicts[entry["stage"], entry["verdict"]["composition"]] = entry["verdict"]
+            except (ValueError, KeyError, TypeError) as exc:
+                raise InputError(
+                    f"{shorten(self.path, 200, quote=False)}, line {number}: not a search record ({exc})"
+                ) from None
+
+    def _write(self, entry: dict) -> None:
+        if self.file is not None:
+            self.file.write(json.dumps(entry) + "\n")
+            self.file.flush()
+
+    def verdict(self, stage: int, composition: Composition) -> Verdict | None:
+        document = self.verdicts.get((stage, composition.name))
+        return None if document is None else verdict_from_json(document, composition)
+
+    def write_verdict(self, stage: int, verdict: Verdict) -> None:
+        self._write({"stage": stage, "verdict": {**verdict.to_json(), "seconds": verdict.seconds}})
+
+    def batch(self, names: list[str]) -> list[CandidateResult] | None:
+        documents = self.batches.get(tuple(names))
+        return None if documents is None else [_result_from_json(d) for d in documents]
+
+    def write_batch(self, names: list[str], results: list[CandidateResult]) -> None:
+        self._write({"batch": names, "results": [_result_json(r) for r in results]})

@@ -1,0 +1,132 @@
+"""The best-first search (``run --search best-first``): the exhaustive run's winner, a certificate
+whose classes add up to the space, and a search stopped anywhere (Ctrl-C, a budget) that ends, run
+again into its folder, as an uninterrupted one does.
+
+The runs use ``tests/data/small.yaml`` (516 compositions, 6 of them through step B), and its
+coarser twin ``small-fast.yaml`` where a search runs many times, in this process: the search's
+steps do not depend on the engine (``tests/test_ray.py`` and the engine tests hold that for step B
+and step C).
+"""
+
+from __future__ import annotations
+
+import json
+import random
+
+import pytest
+from click.testing import CliRunner
+
+from modular_robots import load_scenario
+from modular_robots.cli import main
+from modular_robots.exceptions import InputError
+from modular_robots.pipeline import run_scenario
+from modular_robots.search import STATE, SearchSettings, search_scenario
+
+from .helpers.paths import SMALL
+
+FAST = SMALL.with_name("small-fast.yaml")
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return load_scenario(FAST)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(scenario, tmp_path_factory):
+    out = tmp_path_factory.mktemp("uninterrupted")
+    calls = []
+    result = search_scenario(scenario, out, jobs=1, on_progress=lambda stage, figures: calls.append(figures))
+    return result, out, len(calls)
+
+
+def _answers(result) -> tuple:
+    return (
+        result.winner.name,
+        result.winner.cost,
+        result.certificate,
+        sorted((c.name, c.status, c.iterations, c.cost_history) for c in result.candidates),
+    )
+
+
+@pytest.mark.parametrize("path", [SMALL, FAST], ids=["small", "small-fast"])
+def test_the_search_finds_the_exhaustive_runs_winner_and_certifies_it(path, tmp_path):
+    scenario = load_scenario(path)
+    out = tmp_path / "out"
+    result = search_scenario(scenario, out, jobs=1)
+    exhaustive = run_scenario(scenario, None, jobs=1)
+    assert result.winner.name == exhaustive.winner.name
+    assert result.winner.cost == pytest.approx(exhaustive.winner.cost, rel=1e-9)
+    certificate = result.certificate
+    assert certificate.total == certificate.space == 516
+    assert certificate.certified and certificate.ended in ("certified", "exhausted")
+    assert certificate.winner == exhaustive.winner.composition and certificate.unexplored == 0
+    # every composition step B removes in the exhaustive run is removed or excluded by a bound here
+    assert (
+        sum(certificate.removed.values()) + sum(certificate.bounded.values()) >= 516 - exhaustive.feasibility.feasible
+    )
+    document = json.loads((out / "result.json").read_text())
+    assert document["status"] == "done" and document["search"]["certificate"]["certified_optimal"] is True
+    assert document["winner"]["composition"] == exhaustive.winner.composition
+
+
+class _Stop(KeyboardInterrupt):
+    pass
+
+
+def _stop_at(call: int):
+    calls = []
+
+    def on_progress(stage, figures):
+        calls.append(figures)
+        if len(calls) == call:
+            raise _Stop
+
+    return on_progress
+
+
+def test_a_search_stopped_anywhere_ends_as_an_uninterrupted_one_when_run_again(scenario, uninterrupted, tmp_path):
+    """Ten stops at random moments (a Ctrl-C raised from the progress callback, after a step or
+    within the lockstep of a batch), each run again into its folder."""
+    expected, _, calls = uninterrupted
+    moments = random.Random(7).sample(range(1, calls + 1), min(10, calls))
+    for trial, moment in enumerate(moments):
+        out = tmp_path / f"trial-{trial}"
+        with pytest.raises(_Stop):
+            search_scenario(scenario, out, jobs=1, on_progress=_stop_at(moment))
+        assert json.loads((out / "result.json").read_text())["status"] == "interrupted"
+        again = search_scenario(scenario, out, jobs=1)
+        assert _answers(again) == _answers(expected), moment
+
+
+def test_a_budget_ends_the_search_with_its_gap_and_a_second_run_goes_on(scenario, uninterrupted, tmp_path):
+    expected, _, _ = uninterrupted
+    try:
+        cut = search_scenario(scenario, tmp_path, jobs=1, settings=SearchSettings(budget=1e-9))
+    except Exception as exc:  # nothing verified at the budget: said so, and the folder says why
+        assert "no composition verified within the budget" in str(exc)
+        document = json.loads((tmp_path / "result.json").read_text())
+        certificate = document["search"]["certificate"]
+        assert certificate["ended"] == "budget" and certificate["unexplored"] > 0
+    else:
+        assert cut.certificate.ended == "budget"
+    again = search_scenario(scenario, tmp_path, jobs=1)
+    assert _answers(again) == _answers(expected)
+
+
+def test_a_record_of_another_search_is_refused_not_overwritten(scenario, tmp_path):
+    (tmp_path / STATE).write_text('{"search": 1, "fingerprint": "0000", "scenario": "other"}\n')
+    with pytest.raises(InputError, match="not the record of a search of this scenario"):
+        search_scenario(scenario, tmp_path, jobs=1)
+    assert (tmp_path / STATE).read_text() == '{"search": 1, "fingerprint": "0000", "scenario": "other"}\n'
+
+
+def test_run_prints_the_certificate_and_refuses_a_budget_without_the_search(tmp_path):
+    result = CliRunner().invoke(main, ["run", str(FAST), "--out", str(tmp_path / "a"), "--budget", "10"])
+    assert result.exit_code == 2 and "add --search best-first" in result.output
+    result = CliRunner().invoke(
+        main, ["run", str(FAST), "--out", str(tmp_path / "b"), "--search", "best-first", "--jobs", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    line = next(line for line in result.output.splitlines() if line.startswith("certificate"))
+    assert "certified optimal among 516 compositions" in line
