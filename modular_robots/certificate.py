@@ -128,6 +128,10 @@ class Ledger:
     def removed(self, composition: str, test: str) -> None:
         self.classes[composition] = f"removed:{test}"
 
+    def removed_many(self, test: str, count: int) -> None:
+        """``count`` compositions removed by ``test``, not named (a run that counts them only)."""
+        self.extra[f"removed:{test}"] += count
+
     def candidate(self, result: CandidateResult, bound: float) -> None:
         composition = result.composition or result.name
         if result.status == CandidateStatus.OPTIMAL:

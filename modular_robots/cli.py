@@ -434,14 +434,19 @@ def run_command(
         + f"; results in {out}",
         err=True,
     )
+    total = sum(count_compositions(scenario.catalog).values())
     with LiveLine() as live:
         step_b = {}
+        started = time.monotonic()
 
         def progress(stage, f):
             if stage == "feasibility":
                 step_b.update(f)
                 if f["checked"] % 50 == 0:
-                    live.show(f"steps A+B: {f['checked']} compositions checked, {f['feasible']} feasible")
+                    live.show(
+                        f"steps A+B: {f['checked']} compositions checked, {f['feasible']} feasible"
+                        + _step_b_left(f["checked"], total, time.monotonic() - started)
+                    )
             else:
                 if step_b:  # step B's final count, before step C's lines
                     live.show(f"steps A+B: {step_b['checked']} compositions checked, {step_b['feasible']} feasible")
@@ -457,6 +462,13 @@ def run_command(
         result = run_scenario(scenario, out, jobs, on_progress=progress, max_compositions=max_compositions)
     click.echo(run_table(result, scenario))
     click.echo(f"wrote {written_files(out)}")
+
+
+def _step_b_left(checked: int, total: int, seconds: float) -> str:
+    """Step B's time still ahead at the rate measured so far (said once it can be measured)."""
+    if checked < 100 or seconds < 2.0 or checked >= total:
+        return ""
+    return f", about {(total - checked) * seconds / checked:.0f} s left at this rate"
 
 
 def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:

@@ -66,7 +66,7 @@ def run_table(result, scenario) -> str:
             f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed",
         ),
         ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),
-        *([("certificate", result.certificate.line())] if getattr(result, "certificate", None) else []),
+        *([("certificate", result.certificate.line())] if result.certificate is not None else []),
         *_unconverged_row(result, scenario),
         ("wall time [s]", ", ".join(f"{k} {s:.1f}" for k, s in result.seconds.items())),
     ]

@@ -20,6 +20,7 @@ from typing import cast
 
 import numpy as np
 
+from .certificate import Certificate, Ledger
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
 from .costs import COSTS
@@ -50,6 +51,7 @@ __all__ = [
     "RunResult",
     "candidate_specs",
     "cost_bound",
+    "exhaustive_certificate",
     "optimize_composition",
     "run_scenario",
     "track_winner",
@@ -72,6 +74,9 @@ class RunResult:
     feasibility: FeasibilitySummary
     rounds: int
     seconds: dict
+    #: What the run proves about its winner (:mod:`~modular_robots.certificate`); None for
+    #: :func:`optimize_composition`, which looks at one composition.
+    certificate: Certificate | None = None
 
     @property
     def iterations(self) -> int:
@@ -221,6 +226,8 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
             reasons = "; ".join(f"{r.name}: {r.reason}" for r in results[:3])
             recorder.finish("failed", f"every candidate failed ({reasons})")
             raise InfeasibleError(f"no candidate converged to a verified trajectory ({reasons})")
+        certificate = exhaustive_certificate(summary, results, bounds, winner)
+        recorder.update(search={"kind": "all", "certificate": certificate.to_json()})
         recorder.record_winner(
             winner,
             f"{scenario.name}: rule {scenario.pruning.rule}",
@@ -228,7 +235,23 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
             winner_approach(winner, scenario),
         )
         recorder.finish("done")
-        return RunResult(tuple(results), winner, summary, rounds, dict(recorder.seconds))
+        return RunResult(tuple(results), winner, summary, rounds, dict(recorder.seconds), certificate)
+
+
+def exhaustive_certificate(
+    summary: FeasibilitySummary,
+    results: Iterable[CandidateResult],
+    bounds: dict[str, float],
+    winner: CandidateResult,
+) -> Certificate:
+    """The certificate of a run that put every composition through step B: each removed by its
+    test, each of the others by its candidates' ends (:class:`~modular_robots.certificate.Ledger`)."""
+    ledger = Ledger(summary.checked)
+    for test, count in summary.removed.items():
+        ledger.removed_many(test, count)
+    for result in results:
+        ledger.candidate(result, bounds.get(result.name, 0.0))
+    return ledger.certificate(winner.composition, winner.cost, "exhausted")
 
 
 def optimize_composition(

@@ -8,9 +8,9 @@ Collision primitives are segments with a radius, attached to a frame: a capsule 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import numpy as np
 import pinocchio as pin
@@ -66,12 +66,12 @@ class RobotModel:
         tool_frame: str = "tool0",
         primitives: Sequence[Primitive] = (),
         name: str = "",
-        urdf: str | None = None,
+        urdf: str | Callable[[], str] | None = None,
     ):
         self.model = model
         self.data = model.createData()
         self.name = name or model.name
-        self.urdf = urdf
+        self._urdf = urdf
         if not model.existFrame(tool_frame):
             raise ValueError(f"robot {self.name!r} has no frame {tool_frame!r}")
         self.tool_frame = tool_frame
@@ -83,6 +83,13 @@ class RobotModel:
         self._primitive_frames = [int(model.getFrameId(p.frame)) for p in self.primitives]
         #: Whether the joints have friction (``model.damping``: viscous, ``model.friction``: Coulomb).
         self.has_friction = bool(np.any(model.damping != 0.0) or np.any(model.friction != 0.0))
+
+    @property
+    def urdf(self) -> str | None:
+        """The URDF text of the model (written when first asked for: step B never needs it)."""
+        if callable(self._urdf):
+            self._urdf = self._urdf()
+        return self._urdf
 
     # -- sizes and limits --------------------------------------------------------------------
     @property
@@ -330,20 +337,21 @@ def robot_model(composition: Composition, catalog: Catalog, payload: float = 0.0
     shared, since nothing changes it; every call gets its own :class:`RobotModel`, with its own
     Pinocchio ``Data``, so two users of the same composition never share a workspace.
     """
-    model, urdf = _pinocchio_model(composition, catalog, payload)
+    model = _pinocchio_model(composition, catalog, payload)
+    urdf = partial(composition_urdf, composition, catalog, payload)
     return RobotModel(model, "tool0", composition_primitives(composition, catalog), composition.name, urdf)
 
 
 @lru_cache(maxsize=256)
-def _pinocchio_model(composition: Composition, catalog: Catalog, payload: float) -> tuple[pin.Model, str]:
+def _pinocchio_model(composition: Composition, catalog: Catalog, payload: float) -> pin.Model:
     model = pin.buildModelFromXML(composition_urdf(composition, catalog, payload, collision=False))
     if catalog.general:
         joints = [j for m in composition.modules for j in catalog.general_module(m).joints]
         model.armature = np.array([j.drive.armature for j in joints], dtype=float)
-        return model, composition_urdf(composition, catalog, payload)
+        return model
     joint_modules = [catalog.module(m) for m in composition.modules if catalog.module(m).dof]
     model.armature = np.array([m.armature for m in joint_modules], dtype=float)
-    return model, composition_urdf(composition, catalog, payload)
+    return model
 
 
 def robot_from_urdf(urdf: str, armature=None, tool_frame: str = "tool0", name: str = "") -> RobotModel:

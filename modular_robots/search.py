@@ -103,11 +103,8 @@ class SearchSettings:
     frontier: int = 500_000
 
 
-@dataclass(frozen=True)
-class SearchResult(RunResult):
-    """:class:`~modular_robots.pipeline.RunResult` with the search's certificate."""
-
-    certificate: Certificate = field(default_factory=Certificate)
+#: A search's outcome: a :class:`~modular_robots.pipeline.RunResult` (its ``certificate`` set).
+SearchResult = RunResult
 
 
 @dataclass(order=True)
@@ -416,7 +413,12 @@ class _Search:
         }
         if self.first_estimate is None and eta is not None:
             self.first_estimate = {"at_s": round(self.seconds["search"], 3), "step_b_left_s": round(eta, 3)}
-        block = {"progress": figures, "first_estimate": self.first_estimate, "certificate": self.certificate}
+        block = {
+            "kind": "best-first",
+            "progress": figures,
+            "first_estimate": self.first_estimate,
+            "certificate": self.certificate,
+        }
         self.recorder.update(search=block, seconds=self.seconds, every=every)
         self.notify("search", figures)
 

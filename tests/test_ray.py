@@ -27,6 +27,7 @@ from modular_robots.exceptions import EngineError, Terminated
 from modular_robots.execution import ExecutionSettings, make_engine, make_executor, terminations_raise
 from modular_robots.pipeline import run_scenario, with_execution
 from modular_robots.scenario import load_scenario
+from modular_robots.search import search_scenario
 
 from .helpers.paths import CLI, ROOT, SMALL
 from .helpers.runs import signal_stopped, start_run
@@ -184,6 +185,19 @@ def test_run_gives_the_same_answers_on_every_engine(cluster, tmp_path):
     assert ray_run["settings"]["engine"] == "ray" and process["settings"]["engine"] == "process"
     assert {c["status"] for c in ray_run["candidates"]} == {"optimal"}
     assert _no_actors_left()  # every candidate's actor was killed when it ended
+
+
+def test_the_search_gives_the_same_answer_on_ray(cluster, tmp_path):
+    """``run --search best-first --engine ray``: step B's stages as Ray tasks, candidates in
+    actors; the same winner, candidates and certificate as in one process."""
+    scenario = load_scenario(SMALL.with_name("small-fast.yaml"))
+    on_ray = search_scenario(with_execution(scenario, "ray"), tmp_path / "ray")
+    here = search_scenario(scenario, tmp_path / "here", jobs=1)
+    assert on_ray.certificate == here.certificate and on_ray.certificate.certified
+    assert [(c.name, c.status, c.cost_history) for c in on_ray.candidates] == [
+        (c.name, c.status, c.cost_history) for c in here.candidates
+    ]
+    assert _no_actors_left()
 
 
 def _no_actors_left(seconds: float = 10.0) -> bool:

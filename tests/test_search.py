@@ -65,6 +65,10 @@ def test_the_search_finds_the_exhaustive_runs_winner_and_certifies_it(path, tmp_
     assert (
         sum(certificate.removed.values()) + sum(certificate.bounded.values()) >= 516 - exhaustive.feasibility.feasible
     )
+    # the exhaustive run's own certificate: every composition through step B, none unexplored
+    assert exhaustive.certificate.total == 516 and exhaustive.certificate.unexplored == 0
+    assert exhaustive.certificate.winner == exhaustive.winner.composition
+    assert sum(exhaustive.certificate.removed.values()) == 516 - exhaustive.feasibility.feasible
     document = json.loads((out / "result.json").read_text())
     assert document["status"] == "done" and document["search"]["certificate"]["certified_optimal"] is True
     assert document["winner"]["composition"] == exhaustive.winner.composition
