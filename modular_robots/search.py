@@ -92,13 +92,15 @@ _BOUND_NAME = {_UNCHECKED: TOOL_SPEED, _RELAXED: IK_TRAVEL, _CANDIDATE: JOINT_TR
 @dataclass(frozen=True)
 class SearchSettings:
     """``budget``: wall seconds after which the search ends with the best verified robot and its
-    gap (None: no limit). ``batch``: compositions advanced per step through each stage of step B
-    (None: 32 per worker); ``candidates``: candidates optimised per step.
-    ``frontier``: compositions held at once; a larger space is taken in passes of this many, in
-    the order of their catalogue bounds (bounded memory)."""
+    gap (None: no limit). ``batch``: compositions advanced per step through each stage of step B;
+    ``candidates``: candidates optimised per step. Neither depends on the number of workers, so
+    neither does the answer, and a search stopped on one machine goes on on another (a cluster
+    of many CPUs wants a larger ``batch``). ``frontier``: compositions held at once; a larger
+    space is taken in passes of this many, in the order of their catalogue bounds (bounded
+    memory). ``batch``, ``candidates`` and ``frontier`` are part of what a record is of."""
 
     budget: float | None = None
-    batch: int | None = None
+    batch: int = 64
     candidates: int = 16
     frontier: int = 500_000
 
@@ -151,7 +153,7 @@ class _Search:
         self.scenario, self.out, self.engine = scenario, out, engine
         self.settings, self.feasibility, self.notify = settings, feasibility, notify
         self.space = composition_space(scenario.catalog, max_compositions or 2**62, engine.jobs)
-        self.batch = settings.batch or 32 * max(engine.jobs, 1)
+        self.batch = settings.batch
         self.tolerance = feasibility.tolerance
         self.ledger = Ledger(self.space)
         self.summary = FeasibilitySummary()
@@ -162,7 +164,7 @@ class _Search:
         self.passed = 0  # compositions of the space taken into the frontier so far
         self.beyond: tuple[int, float] = (0, math.inf)  # the rest: how many, their smallest bound
         self.seconds = {"search": 0.0, "feasibility": 0.0, "optimization": 0.0}
-        self.log = _Log(out, scenario, feasibility, self.batch)
+        self.log = _Log(out, scenario, feasibility, replace(settings, budget=None))
         self.certificate: dict | None = None
         self.unchecked = 0  # compositions in the frontier not through any step B yet
         self.relaxed_cpu = [0, 0.0]  # compositions through the relaxed step B here, their CPU seconds
@@ -490,9 +492,9 @@ class _Log:
     """``search.jsonl``: what each step found, appended and flushed as it comes; read back when
     the search starts in a folder that has it (of the same scenario and settings)."""
 
-    def __init__(self, out, scenario: Scenario, feasibility: FeasibilitySettings, batch: int):
+    def __init__(self, out, scenario: Scenario, feasibility: FeasibilitySettings, settings: SearchSettings):
         self.path = Path(out) / STATE if out is not None else None
-        text = repr((scenario.catalog, scenario.task, scenario.optimizer, scenario.pruning, feasibility, batch))
+        text = repr((scenario.catalog, scenario.task, scenario.optimizer, scenario.pruning, feasibility, settings))
         self.fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
         self.scenario = scenario
         self.verdicts: dict[tuple[int, str], dict] = {}

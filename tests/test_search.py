@@ -91,7 +91,8 @@ def _stop_at(call: int):
 
 def test_a_search_stopped_anywhere_ends_as_an_uninterrupted_one_when_run_again(scenario, uninterrupted, tmp_path):
     """Ten stops at random moments (a Ctrl-C raised from the progress callback, after a step or
-    within the lockstep of a batch), each run again into its folder."""
+    within the lockstep of a batch), each run again into its folder, every other time on two
+    worker processes instead of this one."""
     expected, _, calls = uninterrupted
     moments = random.Random(7).sample(range(1, calls + 1), min(10, calls))
     for trial, moment in enumerate(moments):
@@ -99,7 +100,7 @@ def test_a_search_stopped_anywhere_ends_as_an_uninterrupted_one_when_run_again(s
         with pytest.raises(_Stop):
             search_scenario(scenario, out, jobs=1, on_progress=_stop_at(moment))
         assert json.loads((out / "result.json").read_text())["status"] == "interrupted"
-        again = search_scenario(scenario, out, jobs=1)
+        again = search_scenario(scenario, out, jobs=1 + trial % 2)
         assert _answers(again) == _answers(expected), moment
 
 
