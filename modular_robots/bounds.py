@@ -158,8 +158,40 @@ def _module_frames(
 def tool_speed_limit(composition: Composition, catalog: Catalog) -> float:
     """An upper bound on the tool's speed [m/s] of ``composition`` within its velocity limits, in
     any configuration: the sum of :attr:`Lever.speed` (infinite if a joint has no finite limit)."""
-    speed = sum(lever.speed for lever in joint_levers(composition, catalog))
+    if catalog.general:
+        frame, partial, revolute, stroke, prismatic = _general_speed(catalog, composition.modules)
+        speed = partial + prismatic
+        if revolute:
+            speed += revolute * (float(np.linalg.norm((frame @ RX_PI)[:3, 3])) + stroke)
+    else:
+        speed = sum(lever.speed for lever in joint_levers(composition, catalog))
     return float(speed) if math.isfinite(speed) else math.inf
+
+
+@functools.lru_cache(maxsize=65536)
+def _general_speed(catalog: Catalog, modules: tuple[str, ...]) -> tuple[np.ndarray, float, float, float, float]:
+    """:func:`_general_walk` summed as it goes, for millions of assemblies: each piece counts
+    once for every revolute joint before it, so the speed bound is the sum of each piece times the
+    velocity limits of the revolute joints up to its start, plus the prismatic joints' limits.
+    After the chain ``modules``: the last outlet's frame (as in :func:`_general_walk`), that sum
+    over the pieces closed so far, the revolute joints' summed limits, the last joint's stroke,
+    and the prismatic joints' summed limits."""
+    if not modules:
+        return RX_PI, 0.0, 0.0, 0.0, 0.0
+    frame, partial, revolute, stroke, prismatic = _general_speed(catalog, modules[:-1])
+    inlet, steps, outlet = _module_frames(catalog, modules[-1])
+    frame = frame @ inlet
+    for joint, parent, child in steps:
+        if revolute or prismatic:
+            partial += revolute * (float(np.linalg.norm((frame @ parent)[:3, 3])) + stroke)
+        if joint.type == "prismatic":
+            prismatic += joint.velocity
+            stroke = max(abs(joint.lower), abs(joint.upper))
+        else:
+            revolute += joint.velocity
+            stroke = 0.0
+        frame = child
+    return frame @ outlet, partial, revolute, stroke, prismatic
 
 
 def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolerance: float) -> CatalogBound:
