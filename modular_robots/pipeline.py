@@ -196,6 +196,8 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
         manager: PruningManager | None = None
 
         def record(every: float = 0.0) -> list[CandidateResult]:
+            if not recorder.due(every):  # a round is milliseconds; gathering 30,000 results is not
+                return []
             done: dict[str, CandidateResult] = manager.results if manager is not None else {}
             results = [
                 _labelled(done.get(spec.name) or CandidateResult.never_started(spec.name), spec) for spec in specs

@@ -77,6 +77,7 @@ class RunRecorder:
         self.search: dict | None = None
         self._start = time.perf_counter()
         self._last_write = -float("inf")
+        self._write_seconds = 0.0
 
     # -- the lifecycle ----------------------------------------------------------------------------
     def __enter__(self) -> RunRecorder:
@@ -121,8 +122,17 @@ class RunRecorder:
         self.seconds.update(seconds or {})
         if results is not None:
             self.results = list(results)
-        if time.perf_counter() - self._last_write >= every:
+        if self.due(every):
             self._write()
+
+    def due(self, every: float) -> bool:
+        """Whether :meth:`update` with ``every`` would rewrite the document now (a caller with
+        much to gather for it can skip the gathering when not). A periodic rewrite (``every`` > 0)
+        also waits ten times as long as the last one took: a document of tens of thousands of
+        candidates takes a good part of a second to write, and the run's own work comes first."""
+        if every <= 0.0:
+            return True
+        return time.perf_counter() - self._last_write >= max(every, 10.0 * self._write_seconds)
 
     def record_winner(
         self,
@@ -207,6 +217,7 @@ class RunRecorder:
         self._last_write = time.perf_counter()
         if self.path is not None:
             atomic_write(self.path / RESULT, result_text(self.document()))
+        self._write_seconds = time.perf_counter() - self._last_write
 
 
 def previous_files(folder: Path) -> list[str]:
