@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers and IDEs
     from .catalog import Catalog, Grammar, JointLimits, Module, load_catalog
+    from .certificate import Certificate
     from .collision import Approach, CollisionModel, Distances, closest_approach
     from .composition import Composition, count_compositions, enumerate_compositions
     from .costs import Cost
@@ -74,6 +75,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
     from .report import export_controller_rate, read_winner
     from .robot import Primitive, RobotModel, robot_model
     from .scenario import OptimizerSettings, PruningSettings, Scenario, Task, load_scenario
+    from .search import SearchSettings, search_scenario
     from .timor import import_timor
     from .urdf import composition_urdf, write_urdf
     from .viewer import write_viewer
@@ -159,6 +161,9 @@ __all__ = [
     "ratio_rule",
     "robot_model",
     "run_scenario",
+    "search_scenario",
+    "SearchSettings",
+    "Certificate",
     "sample_trajectory",
     "verify",
     "write_urdf",
@@ -245,6 +250,9 @@ _PUBLIC = {
     "ratio_rule": "pruning",
     "robot_model": "robot",
     "run_scenario": "pipeline",
+    "search_scenario": "search",
+    "SearchSettings": "search",
+    "Certificate": "certificate",
     "sample_trajectory": "ocp",
     "verify": "ocp",
     "write_urdf": "urdf",

@@ -75,7 +75,8 @@ class Certificate:
             "winner_cost": self.winner_cost,
             "smallest_open_bound": self.open_bound,
             "certified_optimal": self.certified,
-            "gap": self.gap,
+            "gap": self.gap if self.gap is None or math.isfinite(self.gap) else None,
+            "gap_unbounded": self.gap is not None and not math.isfinite(self.gap),
             "ended": self.ended,
         }
 
@@ -94,16 +95,24 @@ class Certificate:
         if self.winner is None:
             return f"no verified composition among {self.space:,}: {classes}"
         verdict = "certified optimal" if self.certified else "not certified"
-        gap = "" if self.gap is None or self.gap <= 1.0 else f"; gap {self.gap:.3g}x"
+        if self.gap is None or self.gap <= 1.0:
+            gap = ""
+        elif math.isfinite(self.gap):
+            gap = f"; gap {self.gap:.3g}x"
+        else:
+            gap = "; gap unbounded (a composition left has no bound above 0)"
         return f"{self.winner} ({self.winner_cost:.4g}) {verdict} among {self.space:,} compositions: {classes}{gap}"
 
 
-_SOLVED, _RATIO = "solved", "ratio"
+_SOLVED, _UNEXPLORED, _RATIO = "solved", "unexplored", "ratio"
+#: A composition's class when its candidates end differently: the first of these it has.
+_RANK = {_SOLVED: 0, _UNEXPLORED: 1, _RATIO: 2}
 
 
 class Ledger:
-    """The class of every composition a search has looked at, kept as it goes (a composition's
-    best class wins: solved, then ratio-pruned, then excluded by a bound)."""
+    """The class of every composition a search has looked at, kept as it goes (a composition whose
+    candidates end differently takes the first of: solved, unexplored, ratio-pruned, excluded by
+    a bound)."""
 
     def __init__(self, space: int):
         self.space = space
@@ -120,9 +129,8 @@ class Ledger:
         return len(self.classes)
 
     def _set(self, composition: str, kind: str) -> None:
-        rank = {_SOLVED: 0, _RATIO: 1}
         old = self.classes.get(composition)
-        if old is None or rank.get(kind, 2) < rank.get(old, 2):
+        if old is None or _RANK.get(kind, 3) < _RANK.get(old, 3):
             self.classes[composition] = kind
 
     def removed(self, composition: str, test: str) -> None:
@@ -141,18 +149,23 @@ class Ledger:
             self._set(composition, _SOLVED)
             self.open.append(bound)
             self.uncertain.append(bound)
-        elif result.status == CandidateStatus.PRUNED and result.reason.startswith("bound"):
+        elif result.pruned_by_bound:
             self._set(composition, f"bound:{JOINT_TRAVEL}")
-        else:  # pruned by the ratio rule, or stopped
+        elif result.status == CandidateStatus.PRUNED:  # by the ratio rule
             self._set(composition, _RATIO)
             self.open.append(bound)
+        else:  # stopped before its end (a run cut short)
+            self._set(composition, _UNEXPLORED)
+            self.open.append(bound)
+            self.uncertain.append(bound)
+            self.unexplored.append(bound)
 
     def left(self, composition: str, bound: float, name: str, best: float) -> None:
         """A composition (or one of its candidates) still in the frontier when the search ended."""
         if bound >= best * (1.0 - _EQUAL):
             self._set(composition, f"bound:{name}")
         else:
-            self._set(composition, "unexplored")
+            self._set(composition, _UNEXPLORED)
             self.open.append(bound)
             self.uncertain.append(bound)
             self.unexplored.append(bound)

@@ -176,6 +176,7 @@ class _Search:
     def run(self) -> SearchResult:
         start = time.perf_counter()
         deadline = math.inf if self.settings.budget is None else start + self.settings.budget
+        self.log.check()  # before the recorder replaces the folder's results
         with (
             RunRecorder(
                 self.out,
@@ -187,13 +188,11 @@ class _Search:
             self.log,
         ):
             self.recorder = recorder
-            self._take_pass(after=None)
+            self._take_pass(None, deadline)
             ended = "certified"
             while True:
                 self.seconds["search"] = time.perf_counter() - start
                 self._record()
-                if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._best_cost():
-                    self._take_pass(after=self.last_key)
                 lowest = self._lowest()
                 if lowest is None:
                     ended = "exhausted"
@@ -203,6 +202,9 @@ class _Search:
                 if time.perf_counter() >= deadline:
                     ended = "budget"
                     break
+                if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._best_cost():
+                    self._take_pass(self.last_key, deadline)
+                    continue
                 self._step()
             certificate = self._certificate(ended)
             self.certificate = certificate.to_json()
@@ -239,13 +241,19 @@ class _Search:
             self.seconds["feasibility"] += time.perf_counter() - t0
 
     # -- stage 0: the catalogue bounds --------------------------------------------------------------
-    def _take_pass(self, after: tuple | None) -> None:
+    def _take_pass(self, after: tuple | None, deadline: float) -> None:
         """Put into the frontier the ``frontier`` compositions of smallest catalogue bound after
-        the key ``after`` (all of them when the space is small enough)."""
+        the key ``after`` (all of them when the space is small enough). At the ``deadline`` the
+        pass ends where it is: the compositions it has not bounded count as beyond the frontier
+        with a bound of 0 (nothing is known of them)."""
         keep = self.settings.frontier
         kept: list[tuple[float, int, Composition]] = []  # a max-heap by key: (-bound, -index)
         beyond, smallest = 0, math.inf
         for index, composition in enumerate(enumerate_compositions(self.scenario.catalog)):
+            if index % 4096 == 0 and time.perf_counter() >= deadline:
+                unknown = self.space - self.passed - len(kept) - beyond
+                beyond, smallest = beyond + unknown, 0.0
+                break
             bound = catalog_bound(composition, self.scenario.catalog, self.scenario.task, self.tolerance).value
             key = (bound, index)
             if after is not None and key <= after:
@@ -501,38 +509,54 @@ class _Log:
         self.batches: dict[tuple[str, ...], list[dict]] = {}
         self.file: IO[str] | None = None
 
+    def check(self) -> None:
+        """Refuse a record of another search (or not a record) before anything in the folder
+        changes: the results of the run it belongs to stay as they are."""
+        lines = self._lines()
+        if not lines:
+            return
+        try:
+            header = json.loads(lines[0])
+        except ValueError:
+            header = {}
+        if (
+            not isinstance(header, dict)
+            or header.get("search") != FORMAT
+            or header.get("fingerprint") != self.fingerprint
+        ):
+            raise InputError(
+                f"{shorten(self.path, 200, quote=False)}: not the record of a search of this scenario with these "
+                "settings; remove it to start afresh, or choose another folder (--out)"
+            )
+
+    def _lines(self) -> list[str]:
+        """The record's complete lines (a last line cut short by a stop is not one; none if the
+        file is missing, or was cut before its first line ended)."""
+        if self.path is None or not self.path.exists():
+            return []
+        with open(self.path, encoding="utf-8") as file:
+            return file.read().split("\n")[:-1]
+
     def __enter__(self) -> _Log:
         if self.path is None:
             return self
-        if self.path.exists():
-            self._read()
-            self.file = open(self.path, "a", encoding="utf-8")
-        else:
-            self.file = open(self.path, "x", encoding="utf-8")
+        self.check()  # again, in the folder now locked
+        lines = self._lines()
+        if not lines:
+            self.file = open(self.path, "w", encoding="utf-8")
             self._write({"search": FORMAT, "fingerprint": self.fingerprint, "scenario": self.scenario.name})
+            return self
+        self._read(lines)
+        with open(self.path, "r+", encoding="utf-8") as file:  # drop a last line cut short
+            file.truncate(sum(len(line.encode()) + 1 for line in lines))
+        self.file = open(self.path, "a", encoding="utf-8")
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self.file is not None:
             self.file.close()
 
-    def _read(self) -> None:
-        assert self.path is not None
-        with open(self.path, encoding="utf-8") as file:
-            lines = file.read().split("\n")
-        if lines and lines[-1]:  # a last line cut short by a stop
-            lines = lines[:-1]
-            with open(self.path, "r+", encoding="utf-8") as file:
-                file.truncate(sum(len(line.encode()) + 1 for line in lines))
-        try:
-            header = json.loads(lines[0]) if lines and lines[0] else {}
-        except ValueError:
-            header = {}
-        if header.get("search") != FORMAT or header.get("fingerprint") != self.fingerprint:
-            raise InputError(
-                f"{shorten(self.path, 200, quote=False)}: not the record of a search of this scenario with these "
-                "settings; remove it to start afresh, or choose another folder (--out)"
-            )
+    def _read(self, lines: list[str]) -> None:
         for number, line in enumerate(lines[1:], start=2):
             if not line:
                 continue

@@ -11,15 +11,19 @@ and step C).
 from __future__ import annotations
 
 import json
+import math
 import random
 
 import pytest
 from click.testing import CliRunner
 
 from modular_robots import load_scenario
+from modular_robots.certificate import Ledger
 from modular_robots.cli import main
 from modular_robots.exceptions import InputError
 from modular_robots.pipeline import run_scenario
+from modular_robots.plan.candidate import CandidateResult
+from modular_robots.pruning import bound_rule
 from modular_robots.search import STATE, SearchSettings, search_scenario
 
 from .helpers.paths import SMALL
@@ -119,11 +123,36 @@ def test_a_budget_ends_the_search_with_its_gap_and_a_second_run_goes_on(scenario
     assert _answers(again) == _answers(expected)
 
 
-def test_a_record_of_another_search_is_refused_not_overwritten(scenario, tmp_path):
-    (tmp_path / STATE).write_text('{"search": 1, "fingerprint": "0000", "scenario": "other"}\n')
+def test_a_record_of_another_search_is_refused_not_overwritten(scenario, uninterrupted, tmp_path):
+    (tmp_path / STATE).write_text('{"search": 1, "fingerprint": "0000", "scenario": "other"}\n{"cut')
     with pytest.raises(InputError, match="not the record of a search of this scenario"):
         search_scenario(scenario, tmp_path, jobs=1)
-    assert (tmp_path / STATE).read_text() == '{"search": 1, "fingerprint": "0000", "scenario": "other"}\n'
+    assert (tmp_path / STATE).read_text() == '{"search": 1, "fingerprint": "0000", "scenario": "other"}\n{"cut'
+    # another scenario into a finished search's folder: refused before its results are touched
+    _, out, _ = uninterrupted
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    with pytest.raises(InputError, match="not the record of a search of this scenario"):
+        search_scenario(load_scenario(SMALL), out, jobs=1)
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+
+
+def test_the_certificate_tells_a_bound_from_the_ratio_rule_and_writes_an_unbounded_gap():
+    """The classes come from the pruning manager's own reasons, and a gap over a bound of 0 (a
+    cost without bounds, a pass cut by the budget) is written as valid JSON."""
+    by_bound = CandidateResult.never_started("a").pruned(0, bound_rule({"a": 2.0}, {"b": 1.0})["a"])
+    by_ratio = CandidateResult.never_started("c").pruned(5, "ratio rule: iterate 3 is 3.00x the reference 1")
+    assert by_bound.pruned_by_bound and not by_ratio.pruned_by_bound
+    ledger = Ledger(4)
+    ledger.candidate(by_bound, 2.0)
+    ledger.candidate(by_ratio, 0.0)
+    ledger.removed("d", "reach")
+    ledger.beyond(1, 0.0, "tool speed", 1.0)
+    certificate = ledger.certificate("b", 1.0, "budget")
+    assert (certificate.bounded, certificate.ratio, certificate.unexplored) == ({"joint travel": 1}, 1, 1)
+    assert certificate.total == 4 and not certificate.certified and certificate.gap == math.inf
+    document = json.loads(json.dumps(certificate.to_json(), allow_nan=False))
+    assert document["gap"] is None and document["gap_unbounded"] is True
+    assert "gap unbounded" in certificate.line()
 
 
 def test_run_prints_the_certificate_and_refuses_a_budget_without_the_search(tmp_path):

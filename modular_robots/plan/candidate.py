@@ -76,6 +76,12 @@ class CandidateResult:
         """The result of a candidate stopped before its first iteration."""
         return cls(name=name, dof=0, status=CandidateStatus.STOPPED, reason=reason, cost_bound=float("nan"))
 
+    @property
+    def pruned_by_bound(self) -> bool:
+        """Whether it was pruned by a lower bound on its cost (safe: it could not win), not by the
+        ratio rule (a heuristic): the bound rule's reasons start ``bound:``."""
+        return self.status == CandidateStatus.PRUNED and " by the bound: " in self.reason
+
     def pruned(self, iteration: int, reason: str = "") -> CandidateResult:
         """This result, pruned at ``iteration`` for ``reason`` (which rule, which bound or ratio)."""
         return replace(
