@@ -480,9 +480,11 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
         + f"; results in {out}",
         err=True,
     )
+    last: dict = {}
     with LiveLine() as live:
 
         def progress(stage, f):
+            last.update(f)
             best = "-" if f["best"] is None else f"{f['best']:.4g}"
             lowest = "-" if f["lowest_bound"] is None else f"{f['lowest_bound']:.4g}"
             live.show(
@@ -491,7 +493,7 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
             )
 
         result = search_scenario(scenario, out, jobs, SearchSettings(budget=budget), on_progress=progress)
-    click.echo(run_table(result, scenario))
+    click.echo(run_table(result, scenario, last))
     click.echo(f"wrote {written_files(out)}")
 
 

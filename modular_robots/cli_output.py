@@ -39,8 +39,9 @@ def written_files(out: Path) -> str:
     return f"{out}/ ({', '.join([RESULT, *files])})"
 
 
-def run_table(result, scenario) -> str:
-    """The summary ``run`` prints: the winner, its verification, the counts and times."""
+def run_table(result, scenario, search: dict | None = None) -> str:
+    """The summary ``run`` prints: the winner, its verification, the counts and times (with a
+    best-first search's last ``search`` figures, how far each composition went)."""
     w = result.winner
     statuses = [c.status for c in result.candidates]
     v = w.verification
@@ -57,7 +58,16 @@ def run_table(result, scenario) -> str:
             f"terminal error {v.terminal_error * 1000:.3f} mm, {clearance_text(v.min_clearance)}, "
             f"{w.substeps} sub-steps",
         ),
-        ("compositions", f"{result.feasibility.checked} enumerated, {result.feasibility.feasible} feasible"),
+        (
+            ("compositions", f"{result.feasibility.checked} enumerated, {result.feasibility.feasible} feasible")
+            if search is None
+            else (
+                "compositions",
+                f"{search['space']:,} in the space: {search['step_b_relaxed']:,} through step B without its "
+                f"collision test, {search['step_b']:,} through the whole step B, "
+                f"{result.feasibility.feasible:,} feasible",
+            )
+        ),
         (
             "candidates",
             f"{len(statuses)} optimised ({result.feasibility.feasible} compositions, "

@@ -12,18 +12,19 @@ stage it passes raises:
 2. after step B itself, per candidate: the bound its problem has
    (:func:`~modular_robots.pipeline.cost_bound`).
 
-The frontier holds one queue per stage. Each step takes from every queue the items of smallest
+The frontier holds one queue per stage. Each step takes from the queues the items of smallest
 bound that are still below the best verified cost (a batch of each; candidates first, so that a
 cost verified in the step lets the others skip what it excludes), advances them one stage
 (stages 0 and 1 on the engine's workers, candidates in the lockstep of
 :class:`~modular_robots.pruning.PruningManager` with the best verified cost so far as its
-incumbent) and puts back what passes with its new bound. Taking from every stage at each step
-makes the search *anytime*: candidates are optimised from the first steps on, however many
-compositions still wait for stage 0 (a stage-0 bound is far below the stage-1 bound of the same
-composition, so one queue in bound order would run the relaxed step B on the whole space before
-any candidate). The search ends when the smallest bound left is not below the best verified cost
-(the winner is then the best of everything the bounds did not exclude), when nothing is left, or
-at the budget.
+incumbent) and puts back what passes with its new bound. While compositions still wait for the
+relaxed step B, the later stages advance once every ``interleave`` steps only: the search is
+*anytime* (candidates are verified from its first steps on, however large the space; one queue in
+bound order would run the relaxed step B on the whole space before any candidate, a stage-0
+bound being far below the stage-1 bound of the same composition), and the share of work spent on
+candidates that a later, better cost would have excluded stays bounded. The search ends when the
+smallest bound left is not below the best verified cost (the winner is then the best of
+everything the bounds did not exclude), when nothing is left, or at the budget.
 
 What each step found is appended to ``search.jsonl`` in the results folder as it comes (its first
 line says which scenario and settings it is of). Run again into that folder, the search reads it
@@ -93,15 +94,19 @@ _BOUND_NAME = {_UNCHECKED: TOOL_SPEED, _RELAXED: IK_TRAVEL, _CANDIDATE: JOINT_TR
 class SearchSettings:
     """``budget``: wall seconds after which the search ends with the best verified robot and its
     gap (None: no limit). ``batch``: compositions advanced per step through each stage of step B;
-    ``candidates``: candidates optimised per step. Neither depends on the number of workers, so
-    neither does the answer, and a search stopped on one machine goes on on another (a cluster
-    of many CPUs wants a larger ``batch``). ``frontier``: compositions held at once; a larger
-    space is taken in passes of this many, in the order of their catalogue bounds (bounded
-    memory). ``batch``, ``candidates`` and ``frontier`` are part of what a record is of."""
+    ``candidates``: candidates optimised per step. ``interleave``: while compositions wait for
+    the relaxed step B below the best cost, the whole step B and step C advance once every this
+    many steps (anytime, at a bounded share of the work: their bounds cannot be compared with the
+    catalogue bounds of the waiting, and a best cost found early excludes less). None of these
+    depends on the number of workers, so neither does the answer, and a search stopped on one
+    machine goes on on another (a cluster of many CPUs wants a larger ``batch``). ``frontier``:
+    compositions held at once; a larger space is taken in passes of this many, in the order of
+    their catalogue bounds (bounded memory). All but the budget are part of what a record is of."""
 
     budget: float | None = None
     batch: int = 64
     candidates: int = 16
+    interleave: int = 8
     frontier: int = 500_000
 
 
@@ -169,6 +174,7 @@ class _Search:
         self.unchecked = 0  # compositions in the frontier not through any step B yet
         self.relaxed_cpu = [0, 0.0]  # compositions through the relaxed step B here, their CPU seconds
         self.rounds = 0
+        self.steps = 0
         self.stage_counts = {_UNCHECKED: 0, _RELAXED: 0}  # compositions through each step B
         self.first_estimate: dict | None = None
 
@@ -228,12 +234,17 @@ class _Search:
         return taken
 
     def _step(self) -> None:
-        candidates = self._take(_CANDIDATE, self.settings.candidates)
+        self.steps += 1
+        best = self._best_cost()
+        unchecked = self.queues[_UNCHECKED]
+        waiting = (unchecked and unchecked[0].bound < best) or (self.beyond[0] and self.beyond[1] < best)
+        later = not waiting or self.steps % self.settings.interleave == 0
+        candidates = self._take(_CANDIDATE, self.settings.candidates) if later else []
         if candidates:
             t0 = time.perf_counter()
             self._optimise(candidates)
             self.seconds["optimization"] += time.perf_counter() - t0
-        checks = self._take(_RELAXED, self.batch) + self._take(_UNCHECKED, self.batch)
+        checks = (self._take(_RELAXED, self.batch) if later else []) + self._take(_UNCHECKED, self.batch)
         self.unchecked -= sum(item.kind == _UNCHECKED for item in checks)
         if checks:
             t0 = time.perf_counter()

@@ -164,3 +164,5 @@ def test_run_prints_the_certificate_and_refuses_a_budget_without_the_search(tmp_
     assert result.exit_code == 0, result.output
     line = next(line for line in result.output.splitlines() if line.startswith("certificate"))
     assert "certified optimal among 516 compositions" in line
+    line = next(line for line in result.output.splitlines() if line.startswith("compositions"))
+    assert line.split(None, 1)[1].startswith("516 in the space: ") and "through the whole step B" in line
