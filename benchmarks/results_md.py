@@ -261,7 +261,7 @@ def _search_lines() -> list[str]:
         estimate = (
             "-"
             if r["first_estimate_step_b_s"] is None
-            else f"{r['first_estimate_step_b_s']:.0f} (at {r['first_estimate_at_s']:.0f} s)"
+            else f"{r['first_estimate_step_b_s']:.3g} (at {r['first_estimate_at_s']:.2g} s)"
         )
         lines.append(
             f"| {r['scenario']} | {r['space']:,} | {_fmt(r['wall_s'])} | {_fmt(r['step_b_s'])} "
@@ -270,7 +270,14 @@ def _search_lines() -> list[str]:
             f"{'-' if r['gap'] is None else format(r['gap'], '.3g')} | {r['ratio_pruned']} | {same}, "
             f"{_fmt(r['exhaustive_wall_s']) if r['exhaustive_wall_s'] else '-'} | {estimate} |"
         )
-    return lines + [""]
+    if reference and reference.get("note"):
+        lines += ["", f"The exhaustive reference: {reference['note']}"]
+    return lines + [
+        "",
+        "The first estimate is the relaxed step B on every composition still waiting, at the rate of "
+        "its first batch; the search stops earlier when a bound lets it.",
+        "",
+    ]
 
 
 def _engines_lines() -> list[str]:

@@ -499,7 +499,7 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
 
 def _eta(figures: dict) -> str:
     seconds = figures.get("eta")
-    return "" if seconds is None else f", at most about {seconds:.0f} s of step B left"
+    return "" if seconds is None else f", about {seconds:.0f} s of step B left at this rate"
 
 
 @main.command("export")

@@ -406,9 +406,10 @@ class _Search:
         return sorted(results.values(), key=lambda r: (r.status != CandidateStatus.OPTIMAL, r.cost, r.name))
 
     def _eta(self) -> float | None:
-        """An upper estimate of the wall seconds of the relaxed step B still ahead [s]: every
-        composition not through it yet, at the CPU seconds each has taken so far (None before any
-        was measured). The search usually ends long before: a bound stops it."""
+        """An estimate of the wall seconds of the relaxed step B still ahead [s]: every composition
+        not through it yet, at the CPU seconds each has taken so far (None before any was
+        measured). A bound may stop the search before; on improv-science2019-pick the first
+        estimate was a quarter below the step B that followed (``benchmarks/RESULTS.md``)."""
         done, seconds = self.relaxed_cpu
         if not done:
             return None
