@@ -156,9 +156,7 @@ class Ledger:
             self.open.append(bound)
         else:  # stopped before its end (a run cut short)
             self._set(composition, _UNEXPLORED)
-            self.open.append(bound)
-            self.uncertain.append(bound)
-            self.unexplored.append(bound)
+            self._still_open(bound)
 
     def left(self, composition: str, bound: float, name: str, best: float) -> None:
         """A composition (or one of its candidates) still in the frontier when the search ended."""
@@ -166,9 +164,7 @@ class Ledger:
             self._set(composition, f"bound:{name}")
         else:
             self._set(composition, _UNEXPLORED)
-            self.open.append(bound)
-            self.uncertain.append(bound)
-            self.unexplored.append(bound)
+            self._still_open(bound)
 
     def beyond(self, count: int, smallest: float, name: str, best: float) -> None:
         """``count`` compositions never taken into the frontier, their smallest bound ``smallest``."""
@@ -176,9 +172,13 @@ class Ledger:
             self.extra[f"bound:{name}"] += count
         else:
             self.extra["unexplored"] += count
-            self.open.append(smallest)
-            self.uncertain.append(smallest)
-            self.unexplored.append(smallest)
+            self._still_open(smallest)
+
+    def _still_open(self, bound: float) -> None:
+        """An unexplored composition's bound: it may still hide a better one."""
+        self.open.append(bound)
+        self.uncertain.append(bound)
+        self.unexplored.append(bound)
 
     def certificate(self, winner: str | None, cost: float, ended: str) -> Certificate:
         counts = Counter(self.classes.values()) + self.extra

@@ -59,7 +59,7 @@ from .feasibility import (
     composition_space,
 )
 from .ocp.candidate import CandidateSpec, make_candidate
-from .pipeline import RunResult, candidate_specs, cost_bound, track_winner, winner_approach
+from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, track_winner, winner_approach
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
 from .plan.document import status_counts
@@ -448,12 +448,6 @@ class _Search:
 def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
     catalog, task, settings = context
     return check_compositions(chunk, catalog, task, settings)
-
-
-def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
-    if result.composition:
-        return result
-    return replace(result, composition=spec.composition.name, boundary_pair=spec.boundary_pair)
 
 
 def _solve(scenario: Scenario, spec: CandidateSpec, expected: CandidateResult) -> CandidateResult:
