@@ -168,7 +168,7 @@ class RobotModel:
 
     @property
     def joint_names(self) -> list[str]:
-        """The movable joints' names, in the order of ``q`` (``joint_1 .. joint_n`` for compositions)."""
+        """The movable joints' names, in the order of ``q`` (``m<i>_<module>_joint``)."""
         return [str(name) for name in self.model.names[1:]]
 
     def drive(self) -> dict:

@@ -2,7 +2,8 @@
 
 Frames: ``base_link``, one URDF link per module named ``m<i>_<ID>`` (``i`` = position in the
 chain, base = 0), ``tool0`` at the effector's output port and a fixed ``payload`` body there.
-Movable joints are ``joint_1`` … ``joint_n``. (General catalogues: see
+Each link's collision primitive is also its ``<visual>``, coloured by the module's kind.
+Movable joints are ``m<i>_<ID>_joint`` (:func:`joint_name`). (General catalogues: see
 :mod:`~modular_robots.urdf_assembly`.) A module's URDF link frame is its body frame
 (input · Rx(twist_in) · M(q)), so the mount of module i+1 on module i is
 ``Tz(length_i) · Rx(twist_out_i + twist_in_{i+1})``.
@@ -15,13 +16,14 @@ from importlib import resources
 from pathlib import Path
 from string import Template
 
+from .appearance import visual_shapes
 from .catalog import Catalog, Module
 from .composition import Composition
 from .folder import atomic_write
 from .urdf_assembly import assembly_urdf
 from .xml_text import xml_attribute, xml_comment
 
-__all__ = ["composition_urdf", "write_urdf", "PAYLOAD_RADIUS", "link_name"]
+__all__ = ["composition_urdf", "write_urdf", "PAYLOAD_RADIUS", "link_name", "joint_name"]
 
 PAYLOAD_RADIUS = 0.05
 """Radius of the payload sphere held at ``tool0`` [m] (SPEC §3)."""
@@ -57,6 +59,12 @@ def link_name(index: int, module: Module) -> str:
     return "base_link" if index == 0 else f"m{index}_{module.id}"
 
 
+def joint_name(index: int, module: Module) -> str:
+    """URDF name of the movable joint of the module at ``index`` in the chain: its module and place
+    (``m3_J1_joint``), so that an integrator can tell which module a joint is."""
+    return f"{link_name(index, module)}_joint"
+
+
 @cache  # a module's fragments are the same in every composition
 def _inertial(module: Module) -> str:
     if module.mass == 0.0:
@@ -75,6 +83,15 @@ def _collision(module: Module) -> str:
         return _fill(
             "capsule", xyz=_vec((0, 0, module.length / 2)), radius=_num(module.radius), length=_num(module.length)
         )
+    return ""
+
+
+@cache
+def _visual(module: Module) -> str:
+    if module.collision == "sphere":
+        return visual_shapes(module.radius, 0.0, module.kind, (0.0, 0.0, module.length))
+    if module.collision == "capsule":
+        return visual_shapes(module.radius, module.length, module.kind, (0.0, 0.0, module.length / 2))
     return ""
 
 
@@ -100,34 +117,31 @@ def composition_urdf(composition: Composition, catalog: Catalog, payload: float 
     payload
         Payload mass [kg], a solid sphere of radius :data:`PAYLOAD_RADIUS` centred at ``tool0``.
     collision
-        Include the collision shapes. A Pinocchio model does not read them, and it is built a
-        fifth faster from a text without them.
+        Include the collision shapes and the visuals (the same primitives, coloured by module
+        kind: :mod:`~modular_robots.appearance`). A Pinocchio model does not read them, and it is
+        built a fifth faster from a text without them.
     """
     if catalog.general:
         body = assembly_urdf(composition, catalog, _payload(payload, collision), collision)
         return _robot(composition, catalog, body)
     parts: list[str] = []
     parent: Module | None = None
-    joint_index = 0
     for index, module in enumerate(catalog.module(m) for m in composition.modules):
-        if module.kind not in ("base", "link") and module.dof:
-            joint_index += 1
-        parts.append(_module_part(index, module, parent, joint_index, collision))
+        parts.append(_module_part(index, module, parent, collision))
         parent = module
     parts.append(_payload(payload, collision))
     return _robot(composition, catalog, "".join(parts))
 
 
 @lru_cache(maxsize=4096)  # step B builds thousands of chains from a few modules in a few places
-def _module_part(index: int, module: Module, parent: Module | None, joint_index: int, collision: bool) -> str:
-    """The URDF of the module at ``index`` in a chain, mounted on ``parent`` (None: the base);
-    ``joint_index`` numbers the movable joints so far, this one included."""
+def _module_part(index: int, module: Module, parent: Module | None, collision: bool) -> str:
+    """The URDF of the module at ``index`` in a chain, mounted on ``parent`` (None: the base)."""
     common = dict(
         index=index,
         module=module.id,
         link=link_name(index, module),
         inertial=_inertial(module),
-        collision=_collision(module) if collision else "",
+        shapes=_collision(module) + _visual(module) if collision else "",
     )
     if parent is not None:
         common.update(
@@ -139,7 +153,7 @@ def _module_part(index: int, module: Module, parent: Module | None, joint_index:
         return _fill("base", **common)
     if module.kind == "link":
         return _fill("link", **common)
-    joint = f"joint_{joint_index}" if module.dof else f"{common['link']}_mount"
+    joint = joint_name(index, module) if module.dof else f"{common['link']}_mount"
     kind = "effector" if module.kind == "effector" else "joint"
     return _fill(
         kind,
@@ -168,8 +182,11 @@ def _payload(mass: float, collision: bool) -> str:
             ixz="0",
             iyz="0",
         )
-    shape = _fill("sphere", xyz="0 0 0", radius=_num(PAYLOAD_RADIUS)) if collision else ""
-    return _fill("payload", mass=_num(mass), radius=_num(PAYLOAD_RADIUS), inertial=inertial, collision=shape)
+    shapes = ""
+    if collision:
+        shapes = _fill("sphere", xyz="0 0 0", radius=_num(PAYLOAD_RADIUS))
+        shapes += visual_shapes(PAYLOAD_RADIUS, 0.0, "payload")
+    return _fill("payload", mass=_num(mass), radius=_num(PAYLOAD_RADIUS), inertial=inertial, shapes=shapes)
 
 
 def write_urdf(path: str | Path, composition: Composition, catalog: Catalog, payload: float = 0.0) -> Path:

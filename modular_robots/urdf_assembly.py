@@ -6,10 +6,11 @@ connector meets the next module's input, the next inlet body sits at
 ``outlet_pose · Rx(pi) · inlet_pose^-1`` in the outlet body (both connectors point away from
 their bodies). A joint sits at ``parent_pose`` in its parent body (URDF link
 ``m<i>_<module>_<joint>``, moving about/along its z axis) and its child body at ``child_pose``
-in the moved joint frame. Movable joints are ``joint_1`` ... in chain order, with the drive's
+in the moved joint frame. Movable joints are named after their module and place (:func:`joint_name`), with the drive's
 friction in ``<dynamics damping="viscous" friction="coulomb"/>`` (URDF has no armature field).
 ``tool0`` is the last module's free output connector (Timor's TCP); the payload sits there.
-Each collision shape gets a frame ``<body link>_c<k>`` whose z axis is the capsule's axis.
+Each collision shape gets a frame ``<body link>_c<k>`` whose z axis is the capsule's axis, and the same
+primitive as its ``<visual>`` in the colour of the module's kind.
 """
 
 from __future__ import annotations
@@ -18,12 +19,21 @@ import math
 
 import numpy as np
 
+from .appearance import visual_shapes
 from .catalog import Catalog
 from .composition import Composition
 from .modules import GeneralModule, Pose
 from .xml_text import xml_comment
 
-__all__ = ["assembly_urdf", "assembly_shapes", "assembly_reach", "matrix", "rpy_from_matrix", "body_link"]
+__all__ = [
+    "assembly_urdf",
+    "assembly_shapes",
+    "assembly_reach",
+    "matrix",
+    "rpy_from_matrix",
+    "body_link",
+    "joint_name",
+]
 
 RX_PI = np.diag([1.0, -1.0, -1.0, 1.0])
 
@@ -63,6 +73,14 @@ def body_link(index: int, module: GeneralModule, body_id: str) -> str:
     return f"m{index}_{module.id}_{body_id}"
 
 
+def joint_name(index: int, module: GeneralModule, joint_id: str) -> str:
+    """URDF name of joint ``joint_id`` of the module at ``index`` in the chain: ``m3_PB21_joint``
+    for a module of one joint, ``m3_<module>_<joint>_joint`` for one of several."""
+    if len(module.joints) == 1:
+        return f"m{index}_{module.id}_joint"
+    return f"m{index}_{module.id}_{joint_id}_joint"
+
+
 def _fixed(name: str, parent: str, child: str, transform: np.ndarray) -> str:
     return (
         f'  <joint name="{name}" type="fixed">\n    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
@@ -83,7 +101,7 @@ def _link(name: str, body=None, collision: bool = True) -> str:
     return f'  <link name="{name}">\n{inner}  </link>\n'
 
 
-def _shapes(link: str, body, collision: bool) -> str:
+def _shapes(link: str, body, collision: bool, kind: str) -> str:
     out = ""
     for k, shape in enumerate(body.collision):
         frame = f"{link}_c{k}"
@@ -92,7 +110,10 @@ def _shapes(link: str, body, collision: bool) -> str:
             if shape.length == 0
             else f'<cylinder radius="{shape.radius!r}" length="{shape.length!r}"/>'
         )
-        inner = f"    <collision>\n      <geometry>{geometry}</geometry>\n    </collision>\n" if collision else ""
+        inner = ""
+        if collision:
+            inner = f"    <collision>\n      <geometry>{geometry}</geometry>\n    </collision>\n"
+            inner += visual_shapes(shape.radius, shape.length, kind)
         out += _fixed(f"{frame}_mount", link, frame, matrix(shape.pose))
         out += f'  <link name="{frame}">\n{inner}  </link>\n'
     return out
@@ -103,7 +124,6 @@ def assembly_urdf(composition: Composition, catalog: Catalog, payload_part: str,
     ``payload_part`` (the payload's URDF, mounted on ``tool0``)."""
     parts = ['  <link name="base_link"/>\n']
     parent, at = "base_link", RX_PI  # the previous outlet (in ``parent``) composed with Rx(pi)
-    joint_index = 0
     for index, module_id in enumerate(composition.modules):
         module = catalog.general_module(module_id)
         parts.append(f"  <!-- {xml_comment(f'module {index}: {module.id} ({module.kind})')} -->\n")
@@ -113,11 +133,11 @@ def assembly_urdf(composition: Composition, catalog: Catalog, payload_part: str,
                 mount = at @ np.linalg.inv(matrix(module.inlet.pose))
                 parts.append(_fixed(f"{link}_mount", parent, link, mount))
             else:
-                joint_index += 1
                 frame = f"m{index}_{module.id}_{joint.id}"
                 lim, drive = joint, joint.drive
                 parts.append(
-                    f'  <joint name="joint_{joint_index}" type="{joint.type}">\n    <parent link="{parent}"/>\n'
+                    f'  <joint name="{joint_name(index, module, joint.id)}" type="{joint.type}">\n'
+                    f'    <parent link="{parent}"/>\n'
                     f'    <child link="{frame}"/>\n    {_origin(matrix(joint.parent_pose))}\n'
                     '    <axis xyz="0 0 1"/>\n'
                     f'    <limit lower="{lim.lower!r}" upper="{lim.upper!r}" velocity="{lim.velocity!r}" '
@@ -127,7 +147,7 @@ def assembly_urdf(composition: Composition, catalog: Catalog, payload_part: str,
                 parts.append(_link(frame))
                 parts.append(_fixed(f"{frame}_child", frame, link, matrix(joint.child_pose)))
             parts.append(_link(link, body, collision))
-            parts.append(_shapes(link, body, collision))
+            parts.append(_shapes(link, body, collision, module.kind))
             parent = link
         at = matrix(module.outlet.pose) @ RX_PI
     parts.append(_fixed("tool0_mount", parent, "tool0", at @ RX_PI))

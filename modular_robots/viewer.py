@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import yourdfpy
 
+from .appearance import KIND_COLOURS, KIND_LABELS, colour_of_rgba
 from .exceptions import InputError, shorten
 from .folder import ResultsFolder, atomic_write
 from .obstacles import obstacle_label
@@ -51,7 +52,8 @@ HEADLESS_CHROMIUM = (
     "--no-first-run",
 )
 #: Colours by module kind (first letter of the module id), for the links of the URDF.
-_COLOURS = {"B": "#6c757d", "J": "#f0a202", "L": "#2f6db5", "E": "#8e44ad", "payload": "#c9a227"}
+#: A link without a coloured ``<visual>`` (a URDF from before they were written).
+_UNPAINTED = "#9aa0a6"
 
 
 def write_viewer(folder: str | Path) -> str:
@@ -107,7 +109,7 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
     return {
         "tf": tf,
         "times": _round(times),
-        "links": [{"name": link.name, "color": _colour(link.name), "shapes": _shapes(link)} for link in links],
+        "links": [{"name": link.name, "color": _colour(link), "shapes": _shapes(link)} for link in links],
         "frames": frames,
         "tool": _round(tool),
         "obstacles": [
@@ -145,11 +147,13 @@ def _shapes(link) -> list[dict]:
     return out
 
 
-def _colour(link: str) -> str:
-    if link == "payload":
-        return _COLOURS["payload"]
-    module = link.split("_", 1)[1] if link.startswith("m") and "_" in link else link
-    return _COLOURS.get(module[:1].upper(), _COLOURS["B"])
+def _colour(link) -> str:
+    """The colour of the link's first ``<visual>`` material (its module's kind: the URDF says it)."""
+    for visual in link.visuals:
+        material = visual.material
+        if material is not None and material.color is not None and material.color.rgba is not None:
+            return colour_of_rgba(material.color.rgba)
+    return KIND_COLOURS["payload"] if link.name == "payload" else _UNPAINTED
 
 
 def _columns(matrix: np.ndarray) -> list[float]:
@@ -206,8 +210,9 @@ def _figure(value: float | int | None, scale: float, spec: str) -> str:
 
 
 def _legend() -> str:
-    kinds = (("B", "base"), ("J", "joint module"), ("L", "link"), ("E", "effector"), ("payload", "payload"))
-    swatches = " ".join(f"<span style='color:{_COLOURS[k]}'>&#9632;</span> {name}" for k, name in kinds)
+    swatches = " ".join(
+        f"<span style='color:{KIND_COLOURS[k]}'>&#9632;</span> {html.escape(KIND_LABELS[k])}" for k in KIND_COLOURS
+    )
     return (
         f"{swatches}; <span style='color:#d9534f'>&#9679;</span> obstacles (mesh: the clearance margin), "
         "<span style='color:#16a34a'>&#9679;</span> start, <span style='color:#222'>&#9679;</span> goal, "

@@ -453,7 +453,7 @@ def test_mujoco_kinematics_dynamics_mass_limits(cat, name, payload):
     d = mujoco.MjData(m)
     n = len(movable)
     assert m.nq == m.nv == n
-    qadr, dadr, jids = mj_qadr(mujoco, m, n)
+    qadr, dadr, jids = mj_qadr(mujoco, m, r.urdf)
     tool = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "tool0")
     assert tool >= 0
 
@@ -499,7 +499,7 @@ def test_yourdfpy_round_trip(cat, name, payload, tmp_path):
     assert urdf.validate() is True
     mods = modules_of(name, cat)
     movable = [mm for mm in mods if mm.dof]
-    names = [f"joint_{i}" for i in range(1, len(movable) + 1)]
+    names = [f"m{i}_{mm.id}_joint" for i, mm in enumerate(mods) if mm.dof]  # module and place
     assert list(urdf.actuated_joint_names) == names
     for jname, mm in zip(names, movable):
         joint = urdf.joint_map[jname]

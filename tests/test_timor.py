@@ -250,7 +250,12 @@ def test_tool_pose_follows_timor_composition_rule(source, catalog_name, name):
     robot = robot_model(Composition.from_name(name, catalog), catalog)
     modules = _timor_modules(source)
     rng = np.random.default_rng(21)
-    assert robot.joint_names == [f"joint_{i + 1}" for i in range(robot.nq)]
+    assert robot.joint_names == [  # named after their module and place in the chain
+        f"m{i}_{m}_joint" if len(joints) == 1 else f"m{i}_{m}_{joint.id}_joint"
+        for i, m in enumerate(name.split("-"))
+        for joints in [catalog.general_module(m).joints]
+        for joint in joints
+    ]
     for _ in range(10):
         q = rng.uniform(robot.lower, robot.upper)
         pin.framesForwardKinematics(robot.model, robot.data, q)

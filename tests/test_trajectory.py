@@ -22,7 +22,7 @@ from modular_robots.report import export_controller_rate
 from modular_robots.robot import RobotModel, robot_from_urdf
 
 from .helpers.models import ARM_GOAL, ARM_START, planar_arm, ur5
-from .helpers.mujoco_engine import mj_qadr, mujoco_model
+from .helpers.mujoco_engine import mj_qadr, mujoco_model, urdf_movable_joints
 from .helpers.paths import PAPER_5KG, SMALL
 
 SMALL_NAME = "B-J1-L1-J1-L1-J1-L1-E2"
@@ -56,8 +56,7 @@ def small_results(tmp_path_factory):
 def _mujoco(urdf_text: str, armature=None):
     mujoco, m = mujoco_model(urdf_text, np.array([0.0, 0.0, -9.81]))
     if armature is not None:
-        n = len(armature)
-        _, dadr, _ = mj_qadr(mujoco, m, n)
+        _, dadr, _ = mj_qadr(mujoco, m, urdf_text)
         m.dof_armature[dadr] = armature
     return mujoco, m
 
@@ -80,13 +79,13 @@ def test_trajectory_csv_follows_the_acceleration_contract_in_mujoco(small_result
     assert len(np.unique(qdd[:-1], axis=0)) == intervals and np.all(qdd[-1] == 0)
 
     document = json.loads((out / "result.json").read_text())
-    mujoco, m = _mujoco((out / "winner.urdf").read_text(), document["winner"]["drive"]["armature"])
+    urdf = (out / "winner.urdf").read_text()
+    mujoco, m = _mujoco(urdf, document["winner"]["drive"]["armature"])
     d = mujoco.MjData(m)
-    qadr, dadr, _ = mj_qadr(mujoco, m, n)
+    qadr, dadr, ids = mj_qadr(mujoco, m, urdf)
+    assert len(ids) == n
     tool = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "tool0")
-    limit = m.jnt_actfrcrange[
-        [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i}") for i in range(1, n + 1)], 1
-    ]
+    limit = m.jnt_actfrcrange[ids, 1]
     for k in range(len(t)):
         d.qpos[qadr], d.qvel[dadr], d.qacc[dadr] = q[k], qd[k], qdd[k]
         mujoco.mj_inverse(m, d)
@@ -158,8 +157,9 @@ def test_export_at_1khz_follows_the_zero_order_hold_contract_in_mujoco(small_res
 
     document = json.loads((out / "result.json").read_text())
     assert t[-1] == pytest.approx(document["winner"]["tf"], abs=1e-9)
-    mujoco, m = _mujoco((out / "winner.urdf").read_text(), document["winner"]["drive"]["armature"])
-    qadr, dadr, _ = mj_qadr(mujoco, m, n)
+    urdf = (out / "winner.urdf").read_text()
+    mujoco, m = _mujoco(urdf, document["winner"]["drive"]["armature"])
+    qadr, dadr, _ = mj_qadr(mujoco, m, urdf)
     m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     d = mujoco.MjData(m)
     worst_q = worst_v = 0.0
@@ -176,7 +176,14 @@ def test_export_at_1khz_follows_the_zero_order_hold_contract_in_mujoco(small_res
     assert worst_q <= 1e-6 and worst_v <= 1e-4  # what it actually achieves
 
     trajectory = json.loads(files["json"].read_text())
-    assert trajectory["joint_names"] == [f"joint_{i}" for i in range(1, n + 1)]
+    assert trajectory["header"] == {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "base_link"}  # start on receipt
+    catalog = load_scenario(SMALL).catalog
+    modules = document["winner"]["composition"].split("-")
+    assert (
+        trajectory["joint_names"]
+        == urdf_movable_joints(urdf)
+        == [f"m{i}_{module}_joint" for i, module in enumerate(modules) if catalog.module(module).dof]
+    )
     assert len(trajectory["points"]) == len(t)
     for k in (0, 1, len(t) // 2, len(t) - 1):
         point = trajectory["points"][k]
@@ -230,7 +237,7 @@ def test_the_paper_winner_is_tracked_at_1khz_without_saturating_in_mujoco(tmp_pa
     reference = controller_rate(run.winner.trajectory, robot, 1000.0)
     mujoco, m = _mujoco(urdf, armature)
     limit = np.asarray(robot.effort_limit)
-    qadr, dadr, _ = mj_qadr(mujoco, m, robot.nv)
+    qadr, dadr, _ = mj_qadr(mujoco, m, urdf)
     error, deviation, clipped = _mujoco_tracking(mujoco, m, qadr, dadr, reference, limit)
     assert error <= 0.01 and deviation <= 0.02 and clipped == 0.0
     ours = document["winner"]["tracking"]

@@ -35,7 +35,9 @@ def test_paper_winner_urdf(paper_catalog, tmp_path):
     model = pin.buildModelFromUrdf(str(path))
     assert model.name == WINNER and " " not in model.name and ":" not in model.name
     assert model.nq == model.nv == 5
-    assert list(model.names)[1:] == [f"joint_{k}" for k in range(1, 6)]
+    modules = WINNER.split("-")  # named after their module and place in the chain
+    named = [f"m{i}_{m}_joint" for i, m in enumerate(modules) if paper_catalog.module(m).dof]
+    assert list(model.names)[1:] == named
     assert np.allclose(model.lowerPositionLimit, -math.pi) and np.allclose(model.upperPositionLimit, math.pi)
     assert np.allclose(model.velocityLimit, 1.0)
     assert np.allclose(model.effortLimit, [100, 100, 100, 100, 95])

@@ -15,6 +15,7 @@ import pytest
 from click.testing import CliRunner
 
 from modular_robots import load_scenario
+from modular_robots.appearance import KIND_COLOURS
 from modular_robots.cli import main
 from modular_robots.ocp.trajectory import Trajectory
 from modular_robots.pipeline import run_scenario
@@ -79,6 +80,13 @@ def test_the_scene_of_an_improv_assembly_places_every_shape(tmp_path):
     shapes = [shape for link in scene["links"] for shape in link["shapes"]]
     assert shapes and all(len(shape["origin"]) == 16 and np.all(np.isfinite(shape["origin"])) for shape in shapes)
     json.dumps(scene, allow_nan=False)
+    # colours by the module's kind in the catalogue (PB21 is a joint module), as the legend says
+    modules = name.split("-")
+    kinds = {"base": "base", "PB21": "joint", "L2": "link", "L4": "link", "L3": "effector"}
+    for link in scene["links"]:
+        kind = "payload" if link["name"] == "payload" else kinds[modules[int(link["name"][1:].split("_")[0])]]
+        assert link["color"] == KIND_COLOURS[kind], link["name"]
+    assert {KIND_COLOURS["joint"], KIND_COLOURS["link"]} <= {link["color"] for link in scene["links"]}
 
 
 def test_the_scene_carries_the_payload_from_start_to_goal(folder):

@@ -165,8 +165,9 @@ def _check_contract(path, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.
 
 def joint_trajectory(trajectory: Trajectory, joint_names: list[str]) -> dict:
     """``trajectory`` shaped like ROS ``trajectory_msgs/JointTrajectory`` (as a JSON-ready dict):
-    ``joint_names`` and ``points`` with ``positions``, ``velocities``, ``accelerations``,
-    ``effort`` and ``time_from_start`` as ``{sec, nanosec}``."""
+    ``header`` (a zero stamp: start on receipt; frame ``base_link``), ``joint_names`` and
+    ``points`` with ``positions``, ``velocities``, ``accelerations``, ``effort`` and
+    ``time_from_start`` as ``{sec, nanosec}``."""
     points = []
     for i, t in enumerate(trajectory.t):
         nanoseconds = round(float(t) * 1e9)
@@ -179,7 +180,8 @@ def joint_trajectory(trajectory: Trajectory, joint_names: list[str]) -> dict:
                 "time_from_start": {"sec": nanoseconds // 1_000_000_000, "nanosec": nanoseconds % 1_000_000_000},
             }
         )
-    return {"joint_names": list(joint_names), "points": points}
+    header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "base_link"}
+    return {"header": header, "joint_names": list(joint_names), "points": points}
 
 
 def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> Trajectory:

@@ -3,6 +3,8 @@ package's models and plans that share no code with the URDF -> Pinocchio path.""
 
 from __future__ import annotations
 
+from xml.etree import ElementTree
+
 import numpy as np
 import pytest
 
@@ -35,8 +37,17 @@ def mujoco_model(urdf_text: str, gravity):
     return mujoco, m
 
 
-def mj_qadr(mujoco, m, n):
-    """qpos/qvel addresses of joint_1..joint_n (so the order never depends on MuJoCo's)."""
-    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i}") for i in range(1, n + 1)]
-    assert min(ids) >= 0, "a joint_i is missing in MuJoCo's model"
+def urdf_movable_joints(urdf_text: str) -> list[str]:
+    """The URDF's revolute and prismatic joints in the order of the file (the chain's order), read
+    with the standard library's XML parser."""
+    root = ElementTree.fromstring(urdf_text)
+    return [j.get("name") for j in root.iter("joint") if j.get("type") in ("revolute", "prismatic", "continuous")]
+
+
+def mj_qadr(mujoco, m, urdf_text: str):
+    """qpos/qvel addresses of the URDF's movable joints in chain order (so the order never
+    depends on MuJoCo's)."""
+    names = urdf_movable_joints(urdf_text)
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name) for name in names]
+    assert ids and min(ids) >= 0, f"a joint of {names} is missing in MuJoCo's model"
     return np.array([m.jnt_qposadr[i] for i in ids]), np.array([m.jnt_dofadr[i] for i in ids]), ids
