@@ -5,10 +5,11 @@ The pipeline, one module per stage, data flowing one way: :mod:`~modular_robots.
 → :mod:`~modular_robots.urdf`, :mod:`~modular_robots.robot` and :mod:`~modular_robots.collision`
 (the models) → :mod:`~modular_robots.feasibility` (step B) → :mod:`modular_robots.ocp` (step C,
 whose results are :mod:`modular_robots.plan`'s values) → :mod:`~modular_robots.pruning` (step D)
-→ :mod:`~modular_robots.report`, :mod:`~modular_robots.viewer` and :mod:`~modular_robots.recorder`
-(step E); :func:`run_scenario` chains them all, :mod:`~modular_robots.execution` decides where work runs and
-:mod:`~modular_robots.folder` keeps a results folder honest (one run, whole files). Units are SI (m, kg, s, N, N m) and
-radians throughout.
+→ :mod:`~modular_robots.report`, :mod:`~modular_robots.viewer`, :mod:`~modular_robots.ros2` and
+:mod:`~modular_robots.recorder` (step E); :func:`run_scenario` chains them all,
+:mod:`~modular_robots.execution` decides where work runs and :mod:`~modular_robots.folder` keeps a
+results folder honest (one run, whole files). Units are SI (m, kg, s, N, N m) and radians
+throughout.
 """
 
 import importlib
@@ -74,6 +75,7 @@ if TYPE_CHECKING:  # the names as the lazy imports give them, for type checkers 
     from .recorder import RunRecorder
     from .report import export_controller_rate, read_winner
     from .robot import Primitive, RobotModel, robot_model
+    from .ros2 import write_ros2_bundle
     from .scenario import OptimizerSettings, PruningSettings, Scenario, Task, load_scenario
     from .search import SearchSettings, search_scenario
     from .timor import import_timor
@@ -147,6 +149,7 @@ __all__ = [
     "read_document",
     "read_winner",
     "write_viewer",
+    "write_ros2_bundle",
     "composition_problem",
     "composition_urdf",
     "count_compositions",
@@ -236,6 +239,7 @@ _PUBLIC = {
     "read_document": "plan",
     "read_winner": "report",
     "write_viewer": "viewer",
+    "write_ros2_bundle": "ros2",
     "composition_problem": "ocp",
     "composition_urdf": "urdf",
     "count_compositions": "composition",

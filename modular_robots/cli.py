@@ -49,6 +49,7 @@ from .feasibility import (
 from .folder import LOCK, atomic_write, check_writable
 from .pipeline import optimize_composition, run_scenario, with_execution, with_pruning
 from .report import RESULT, WINNER_FILES, export_controller_rate, is_export
+from .ros2 import write_ros2_bundle
 from .scenario import MAX_ITERATIONS, RULES, TRANSCRIPTIONS, load_scenario, load_scenario_or_catalog
 from .search import SEARCHES, SearchSettings, search_scenario
 from .timor import import_timor
@@ -505,10 +506,28 @@ def _eta(figures: dict) -> str:
 @main.command("export")
 @click.argument("results", type=ExistingPath(folder=True), metavar="RESULTS_DIR")
 @click.option("--rate", type=Number(1.0, 1e5), default=1000.0, show_default=True, help="Controller rate [Hz].")
+@click.option(
+    "--ros2",
+    "ros2_folder",
+    type=click.Path(path_type=Path, file_okay=False),
+    default=None,
+    help="Write a ROS 2 package to this folder instead (URDF with ros2_control, controllers, goal, launch).",
+)
+@click.option(
+    "--goal-rate",
+    type=Number(0.1, 1e4),
+    default=100.0,
+    show_default=True,
+    help="Points per second of the ROS 2 goal's trajectory [Hz].",
+)
 @user_errors
-def export_command(results: Path, rate: float) -> None:
+def export_command(results: Path, rate: float, ros2_folder: Path | None, goal_rate: float) -> None:
     """Resample the winner of RESULTS_DIR at a controller rate: a CSV under the zero-order-hold
-    contract and a ROS JointTrajectory JSON."""
+    contract and a ROS JointTrajectory JSON; with --ros2, a ROS 2 package that plays it."""
+    if ros2_folder is not None:
+        bundle = write_ros2_bundle(results, ros2_folder, rate, goal_rate)
+        click.echo(f"wrote the ROS 2 package {bundle.package} to {bundle.folder} (its README.md says how to play it)")
+        return
     files = export_controller_rate(results, rate)
     click.echo(f"wrote {files['csv']} and {files['json']}")
 
