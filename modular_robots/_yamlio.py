@@ -10,13 +10,14 @@ import math
 import os
 import re
 import stat
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal, TypeVar, overload
 
 import yaml
 
-from .exceptions import InputError, shorten
+from .exceptions import InputError, InputWarning, shorten
 
 _MISSING = object()
 #: A getter's ``default``: returned as given when the key is absent, so it is part of the result's type.
@@ -237,6 +238,11 @@ class Fields:
         if key is not None and key in self._data.key_lines:
             return self._data.key_lines[key]
         return self._data.line
+
+    def warn(self, key: str | None, message: str) -> None:
+        """Warn (:class:`~modular_robots.exceptions.InputWarning`) that ``key``'s value looks wrong:
+        ``file:line: key.path: message``."""
+        warnings.warn(InputWarning(f"{self.path}:{self.line_of(key)}: {self.key_path(key)}: {message}"), stacklevel=3)
 
     def fail(self, key: str | None, message: str) -> InputError:
         """Build (not raise) the error for ``key``: ``file:line: key.path: message``."""

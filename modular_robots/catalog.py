@@ -328,6 +328,6 @@ def _read_inertia(f: Fields, mass: float, diameter: float, length: float):
 
 
 def _read_limits(f: Fields, joint: str) -> JointLimits:
-    lower, upper, velocity, effort = _joint_limits(f)
+    lower, upper, velocity, effort = _joint_limits(f, joint == "revolute")
     f.done()
     return JointLimits(lower=lower, upper=upper, velocity=velocity, effort=effort)

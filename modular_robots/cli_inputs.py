@@ -11,12 +11,13 @@ import math
 import os
 import signal
 import sys
-from collections.abc import Iterable
+import warnings
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import click
 
-from .exceptions import InputError, ModularRobotsError, Terminated, shorten
+from .exceptions import InputError, InputWarning, ModularRobotsError, Terminated, shorten
 from .execution import ENGINES, JOBS_PER_CORE, address_problem, available_cores, max_jobs, terminations_raise
 from .feasibility import MAX_COMPOSITIONS
 
@@ -39,6 +40,25 @@ __all__ = [
 ]
 
 
+@contextlib.contextmanager
+def _input_warnings_shown() -> Iterator[None]:
+    """Within the block, each :class:`~modular_robots.exceptions.InputWarning` is one
+    ``Warning: ...`` line on stderr, every time (two modules in degrees are two lines); other
+    warnings are shown as Python shows them."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", InputWarning)
+        shown = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, InputWarning):
+                click.echo(f"Warning: {message}", err=True)
+            else:
+                shown(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
+
+
 def user_errors(command):
     """End every failure with a one-line ``Error: …`` and a non-zero exit, never a traceback:
     package errors and failed file operations exit 1, an interruption 130 (Ctrl-C) or 128 + the
@@ -49,7 +69,7 @@ def user_errors(command):
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         try:
-            with terminations_raise(final=True):
+            with terminations_raise(final=True), _input_warnings_shown():
                 return command(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise

@@ -17,6 +17,7 @@ __all__ = [
     "FolderBusyError",
     "EngineError",
     "Terminated",
+    "InputWarning",
     "shorten",
 ]
 
@@ -31,6 +32,12 @@ class InputError(ModularRobotsError, ValueError):
     The message names the file and line (when known), the key path and what was expected,
     e.g. ``catalog.yaml:14: modules[3].mass: expected a number >= 0, got -1``.
     """
+
+
+class InputWarning(UserWarning):
+    """A value given by the user is valid but looks like a mistake (degrees where radians are
+    expected); the message names the file, line and key, as :class:`InputError`'s do. The command
+    line prints each as one ``Warning: ...`` line."""
 
 
 class CatalogError(InputError):

@@ -274,18 +274,37 @@ def _drive(f: Fields) -> Drive:
     return Drive(inertia * ratio * ratio, coulomb, viscous, ratio, inertia)
 
 
-def _joint_limits(f: Fields) -> tuple[float, float, float, float]:
+#: A revolute joint faster than this [rad/s] (about 190 rpm at the output) is warned about: the
+#: value looks like degrees per second (1 rad/s is 57.3 deg/s).
+DEGREES_LIKE_VELOCITY = 20.0
+
+
+def _joint_limits(f: Fields, revolute: bool) -> tuple[float, float, float, float]:
     """A joint's ``position: [lower, upper]``, ``velocity`` and ``effort`` limits, in either
-    catalogue format, within the module bounds."""
+    catalogue format, within the module bounds. A revolute joint's limits that look like degrees
+    (more than a turn either way, faster than :data:`DEGREES_LIKE_VELOCITY`) are warned about."""
     lower, upper = f.vector("position", 2)
     f.check("position", lower < upper, f"expected [lower, upper] with lower < upper, got [{lower:g}, {upper:g}]")
+    degrees = f" (degrees? [{math.radians(lower):.4g}, {math.radians(upper):.4g}] rad)" if revolute else ""
     f.check(
         "position",
         max(-lower, upper) <= MAX_POSITION,
-        f"expected limits within +-{MAX_POSITION:g} (rad or m), got [{lower:g}, {upper:g}]",
+        f"expected limits within +-{MAX_POSITION:g} (rad or m), got [{lower:g}, {upper:g}]{degrees}",
     )
     velocity = f.number("velocity", minimum=MIN_VELOCITY, maximum=MAX_VELOCITY)
     effort = f.number("effort", exclusive_minimum=0.0, maximum=MAX_EFFORT)
+    if revolute and max(-lower, upper) > 2 * math.pi + 1e-9:
+        f.warn(
+            "position",
+            f"[{lower:g}, {upper:g}] rad is more than a turn either way: degrees? Expected radians "
+            f"([{math.radians(lower):.4g}, {math.radians(upper):.4g}] if these are degrees)",
+        )
+    if revolute and velocity > DEGREES_LIKE_VELOCITY:
+        f.warn(
+            "velocity",
+            f"{velocity:g} rad/s is {math.degrees(velocity):,.0f} deg/s: degrees per second? Expected rad/s "
+            f"({math.radians(velocity):.4g} if this is in deg/s)",
+        )
     return lower, upper, velocity, effort
 
 
@@ -294,7 +313,7 @@ def _joint(f: Fields) -> Joint:
     kind = f.string("type", choices=JOINT_TYPES)
     parent, child = _identifier(f, "parent"), _identifier(f, "child")
     limits = f.mapping("limits")
-    lower, upper, velocity, effort = _joint_limits(limits)
+    lower, upper, velocity, effort = _joint_limits(limits, kind == "revolute")
     acceleration = limits.number("acceleration", default=None, exclusive_minimum=0.0, maximum=1e6)
     limits.done()
     parent_pose, child_pose = _pose(f, "parent_pose"), _pose(f, "child_pose")

@@ -176,7 +176,11 @@ def _scenario_from_fields(top: Fields) -> Scenario:
     top.string("description", default="")
     catalog_path = path.parent / top.string("catalog")
     if not catalog_path.exists():
-        raise top.fail("catalog", f"no catalogue file at {catalog_path}")
+        raise top.fail(
+            "catalog",
+            f"no catalogue file at {catalog_path} (looked in {catalog_path.parent.resolve()}: a relative path is "
+            "taken from the scenario's folder)",
+        )
     if not catalog_path.is_file():
         raise top.fail("catalog", f"{catalog_path} is not a regular file")
     if catalog_path.resolve() == path.resolve():

@@ -353,7 +353,8 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
             "catalog: catalogs/paper.yaml",
             "catalog: catalogs/missing.yaml",
             "catalog:",
-            "catalog: no catalogue file at {dir}/catalogs/missing.yaml",
+            "catalog: no catalogue file at {dir}/catalogs/missing.yaml (looked in {dir}/catalogs: a relative path "
+            "is taken from the scenario's folder)",
         ),
     ],
     ids=[

@@ -90,7 +90,11 @@ class MeshObstacle:
         name = f.string("file")
         path = (f.path.parent / name).resolve()  # relative to the scenario's folder
         if not path.exists():
-            raise f.fail("file", f"no mesh file at {path}")
+            raise f.fail(
+                "file",
+                f"no mesh file at {path} (looked in {path.parent}: a relative path is taken from the "
+                "scenario's folder)",
+            )
         try:
             triangles, sha256 = _remember(path)
         except StlError as e:
