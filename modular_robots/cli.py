@@ -177,7 +177,7 @@ def import_timor_command(modules_json: Path, overrides: Path | None, output: Pat
     """Convert a Timor module database (modules.json) to a general catalogue YAML."""
     distinct_files([("-o", output)], [("MODULES_JSON", modules_json), ("--overrides", overrides)])
     result = import_timor(modules_json, overrides)
-    atomic_write(output, result.yaml())
+    result.write(output)
     for line in result.overrides:
         click.echo(f"override: {line}")
     for line in result.collision:

@@ -16,6 +16,7 @@ numerical library: a catalogue is data.
 from __future__ import annotations
 
 import math
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 
 from ._yamlio import Fields
@@ -23,6 +24,7 @@ from ._yamlio import Fields
 __all__ = [
     "Pose",
     "Shape",
+    "Visual",
     "Body",
     "Drive",
     "Joint",
@@ -46,6 +48,11 @@ MAX_ARMATURE = 1e3  # [kg m^2 | kg]
 MAX_POSITION = 100.0  # joint limits [rad | m]
 MIN_VELOCITY, MAX_VELOCITY = 1e-3, 1e3  # [rad/s | m/s]
 MAX_EFFORT = 1e6  # [N m | N]
+MAX_MESH_BYTES = 15_000_000  # a visual mesh file [bytes]: 300,000 triangles of binary STL
+
+#: Mesh files an importer is about to write (absolute paths): the check of the catalogue it is
+#: about to write accepts them before they exist (:mod:`~modular_robots.timor`).
+PENDING_MESHES: ContextVar[frozenset[str]] = ContextVar("pending_meshes", default=frozenset())
 
 
 @dataclass(frozen=True)
@@ -68,16 +75,29 @@ class Shape:
 
 
 @dataclass(frozen=True)
+class Visual:
+    """How a body looks: the STL mesh ``file`` (an absolute path), scaled along its axes by
+    ``scale``, at ``pose`` in the body frame [m]. RViz and the page draw it; dynamics and
+    collision never read it (a body without one is drawn as its collision shapes)."""
+
+    file: str
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    pose: Pose = Pose()
+
+
+@dataclass(frozen=True)
 class Body:
     """A rigid body of a module: ``mass`` [kg], centre of mass ``com`` [m] and ``inertia``
     (ixx, iyy, izz, ixy, ixz, iyz) [kg m^2] about the centre of mass, axes of the body frame;
-    ``collision`` shapes in the body frame."""
+    ``collision`` shapes and ``visual`` meshes in the body frame."""
 
     id: str
     mass: float = 0.0
     com: tuple[float, float, float] = IDENTITY_XYZ
     inertia: tuple[float, float, float, float, float, float] = (0.0,) * 6
     collision: tuple[Shape, ...] = ()
+    #: Out of ``repr``: what a verdict or search state is of (its fingerprint) never depends on it.
+    visual: tuple[Visual, ...] = field(default=(), repr=False)
 
 
 @dataclass(frozen=True)
@@ -259,8 +279,32 @@ def _body(f: Fields) -> Body:
     else:
         f.check("inertia", not any(inertia), "a massless body has no inertia; remove the key")
     shapes = tuple(_shape(s) for s in f.mappings("collision", ()))
+    visuals = tuple(v for v in (_visual(v) for v in f.mappings("visual", ())) if v is not None)
     f.done()
-    return Body(body_id, mass, com, inertia, shapes)
+    return Body(body_id, mass, com, inertia, shapes, visuals)
+
+
+def _visual(f: Fields) -> Visual | None:
+    """A body's visual mesh; None (with a warning naming the folder looked in) if its file is
+    missing: a catalogue copied without its meshes still loads, its bodies drawn as their
+    collision shapes."""
+    name = f.string("mesh")
+    f.check("mesh", name.lower().endswith(".stl"), f"expected an STL file (.stl), got {name!r:.80}")
+    path = (f.path.parent / name).resolve()
+    scale = f.vector("scale", 3, (1.0, 1.0, 1.0))
+    f.check("scale", all(0.0 < c <= 1e3 for c in scale), f"expected 3 numbers in (0, 1000], got {list(scale)}")
+    pose = _pose(f, "pose")
+    f.done()
+    if str(path) not in PENDING_MESHES.get():
+        if not path.is_file():
+            f.warn(
+                "mesh",
+                f"no mesh file at {path} (looked in {path.parent}: a relative path is taken from the catalogue's "
+                "folder); the body is drawn as its collision shapes",
+            )
+            return None
+        f.check("mesh", path.stat().st_size <= MAX_MESH_BYTES, f"{path}: more than {MAX_MESH_BYTES:,} bytes")
+    return Visual(str(path), scale, pose)
 
 
 def _drive(f: Fields) -> Drive:

@@ -37,6 +37,7 @@ from .plan.records import WinnerFiles
 from .plan.tracking import Tracking
 from .report import WINNER_FILES, is_export, write_pruning_plot, write_winner_files
 from .scenario import Scenario
+from .urdf import is_mesh_copy
 from .viewer import VIEWER, write_page
 
 __all__ = ["RunRecorder", "RESULT", "STATUSES", "previous_files"]
@@ -148,7 +149,7 @@ class RunRecorder:
         files = WinnerFiles()
         if self.path is not None:
             start = time.perf_counter()
-            before = _identities(self.path, (*WINNER_FILES, VIEWER))
+            before = _identities(self.path, (*WINNER_FILES, VIEWER, *_mesh_copies(self.path)))
             try:
                 files = write_winner_files(self.path, winner)
                 if pruning_plot_title is not None:
@@ -160,8 +161,8 @@ class RunRecorder:
             except BaseException:  # no winner file without a result.json that names it
                 assert self._folder is not None  # made whenever self.path is given
                 self.winner = None
-                after = _identities(self.path, before)
-                self._folder.remove(name for name in before if after[name] != before[name])  # what we wrote
+                after = _identities(self.path, [*before, *_mesh_copies(self.path)])
+                self._folder.remove(name for name in after if after[name] != before.get(name))  # what we wrote
                 raise
             self.seconds["report"] = time.perf_counter() - start
         self.winner = winner_json(winner, files, tracking, approach)
@@ -222,7 +223,8 @@ class RunRecorder:
 
 def previous_files(folder: Path) -> list[str]:
     """The files a previous run of this package left in ``folder``, which a new run removes:
-    the winner's files its ``result.json`` names, and controller-rate exports of that winner.
+    the winner's files its ``result.json`` names, controller-rate exports of that winner and the
+    visual meshes beside its URDF.
 
     Only names this package writes are ever returned, and only when ``result.json`` is one of ours:
     a folder of the user's keeps its ``joints.png``, and a forged ``result.json`` that names
@@ -232,7 +234,7 @@ def previous_files(folder: Path) -> list[str]:
     names = [n for n in (*WINNER_FILES, VIEWER) if n in named]
     if names:
         with contextlib.suppress(OSError):
-            names += sorted(p.name for p in folder.iterdir() if is_export(p.name))
+            names += sorted(p.name for p in folder.iterdir() if is_export(p.name) or is_mesh_copy(p.name))
     return names
 
 
@@ -246,6 +248,13 @@ def _check_replaceable(folder: Path) -> None:
                 f"{shorten(path, 200, quote=False)}: expected a file a run may replace (or nothing), got a folder, "
                 "device or pipe; remove it or choose another folder (--out)"
             )
+
+
+def _mesh_copies(folder: Path) -> list[str]:
+    try:
+        return sorted(p.name for p in folder.iterdir() if is_mesh_copy(p.name))
+    except OSError:
+        return []
 
 
 def _identities(folder: Path, names) -> dict[str, tuple[int, int] | None]:

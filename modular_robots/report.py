@@ -24,6 +24,7 @@ from .plan.document import read_document, winner_armature, winner_plan_files
 from .plan.records import ResultDocument, WinnerFiles
 from .plan.trajectory import Trajectory, controller_rate, joint_trajectory
 from .robot import RobotModel, robot_from_urdf
+from .urdf import localise_meshes
 
 __all__ = [
     "read_winner",
@@ -66,8 +67,8 @@ def is_export(name: str) -> bool:
 
 
 def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -> WinnerFiles:
-    """Write ``winner.urdf``, ``trajectory.csv`` and the joints plot of an optimal ``result`` into
-    ``folder``; return their names.
+    """Write ``winner.urdf`` (its visual meshes beside it, ``mesh_*.stl``), ``trajectory.csv`` and
+    the joints plot of an optimal ``result`` into ``folder``; return their names.
 
     Raises
     ------
@@ -78,7 +79,7 @@ def write_winner_files(folder: Path, result: CandidateResult, title: str = "") -
         raise ValueError(f"{result.name}: a {result.status} result has no trajectory to write")
     folder = Path(folder)
     if result.urdf is not None:
-        atomic_write(folder / URDF, result.urdf)
+        atomic_write(folder / URDF, localise_meshes(result.urdf, folder)[0])
     with atomic_path(folder / TRAJECTORY) as tmp:
         result.trajectory.write_csv(tmp)
     plot_joints(result.trajectory, folder / JOINTS_PLOT, title or result.name)

@@ -2,9 +2,10 @@
 workspace and plays with ``ros2_control``'s mock hardware and ``joint_trajectory_controller``.
 
 The folder (:func:`write_ros2_bundle`) holds ``package.xml`` and ``CMakeLists.txt`` (an
-``ament_cmake`` package installing the three folders below), ``urdf/robot.urdf`` (the winner's
-URDF with a ``<ros2_control>`` block: position, velocity and effort command and state interfaces
-per movable joint, the states starting at the plan's first configuration, the
+``ament_cmake`` package installing the folders below), ``urdf/robot.urdf`` (the winner's URDF,
+its visual meshes in ``meshes/`` named by ``package://`` URIs, with a ``<ros2_control>`` block:
+position, velocity and effort command and state interfaces per movable joint, the states
+starting at the plan's first configuration, the
 ``mock_components/GenericSystem`` plugin), ``config/controllers.yaml`` (the controller manager
 at the controller rate, ``joint_state_broadcaster`` and ``joint_trajectory_controller`` with
 position commands), ``config/goal.yaml`` and ``goal.json`` (a ``control_msgs/FollowJointTrajectory``
@@ -30,6 +31,7 @@ from .exceptions import InputError
 from .folder import ResultsFolder, atomic_write
 from .plan.trajectory import Trajectory, controller_rate, joint_trajectory
 from .report import read_winner, winner_robot
+from .urdf import is_mesh_copy, localise_meshes
 
 __all__ = ["Ros2Bundle", "write_ros2_bundle", "package_name", "GOAL_TOLERANCE", "PATH_TOLERANCE"]
 
@@ -110,10 +112,11 @@ def write_ros2_bundle(
         robot = winner_robot(results, document, urdf, trajectory)
     joints = tuple(robot.joint_names)
     package = package_name(out)
+    urdf, meshes = _with_package_meshes(urdf, results, out, package)
     goal = follow_joint_trajectory_goal(controller_rate(trajectory, robot, goal_rate), list(joints))
     texts = {
         "package.xml": _package_xml(package),
-        "CMakeLists.txt": _cmake(package),
+        "CMakeLists.txt": _cmake(package, bool(meshes)),
         "urdf/robot.urdf": with_ros2_control(urdf, joints, trajectory.q[0]),
         "config/controllers.yaml": yaml.safe_dump(controllers(joints, rate), sort_keys=False),
         "config/goal.yaml": yaml.safe_dump(goal, sort_keys=False, width=1000),
@@ -126,7 +129,27 @@ def write_ros2_bundle(
         path = out / name
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(path, texts[name])
-    return Ros2Bundle(out, package, joints, _FILES)
+    return Ros2Bundle(out, package, joints, (*_FILES, *(f"meshes/{name}" for name in meshes)))
+
+
+def _with_package_meshes(urdf: str, results: Path, out: Path, package: str) -> tuple[str, tuple[str, ...]]:
+    """The URDF with its visual meshes (copies beside ``winner.urdf``) copied into ``out/meshes``
+    and named ``package://<package>/meshes/...``, as RViz resolves them."""
+
+    def absolute(match: re.Match) -> str:
+        name = match[1]
+        if not is_mesh_copy(name):
+            raise InputError(
+                f"{results / 'winner.urdf'}: visual mesh {name!r:.80}: expected a mesh_*.stl copy beside it"
+            )
+        return f'filename="{(results / name).resolve().as_uri()}"'
+
+    text = re.sub(r'filename="([^"]*)"', absolute, urdf)
+    (out / "meshes").mkdir(parents=True, exist_ok=True)
+    text, names = localise_meshes(text, out / "meshes", f"package://{package}/meshes/")
+    if not names:
+        (out / "meshes").rmdir()
+    return text, names
 
 
 def _check_out(results: Path, out: Path) -> None:
@@ -233,12 +256,13 @@ def _package_xml(package: str) -> str:
     )
 
 
-def _cmake(package: str) -> str:
+def _cmake(package: str, meshes: bool) -> str:
+    folders = "urdf config launch" + (" meshes" if meshes else "")
     return (
         "cmake_minimum_required(VERSION 3.8)\n"
         f"project({package} NONE)\n"
         "find_package(ament_cmake REQUIRED)\n"
-        "install(DIRECTORY urdf config launch DESTINATION share/${PROJECT_NAME})\n"
+        f"install(DIRECTORY {folders} DESTINATION share/${{PROJECT_NAME}})\n"
         "ament_package()\n"
     )
 

@@ -10,7 +10,9 @@ is a distinct identifier (IMPROV: ``PB21``, ``L1``...), else their ``header.ID``
 primitives: ``J2``, ``l_45``...). Collision geometry becomes spheres and capsules that contain
 it (a sphere stays; a cylinder, box or convex mesh piece gets the smallest capsule, over its
 three principal axes and a grid of segment ends, that contains its corners or hull vertices),
-and the volume ratio primitives/shape is written in the module's ``notes``. Data that need a
+and the volume ratio primitives/shape is written in the module's ``notes``. A visual mesh becomes
+an STL beside the catalogue (Timor's, or the convex hulls of the collision mesh's pieces where the
+database does not hold it; :attr:`TimorImport.meshes`). Data that need a
 decision (a non-physical inertia, an infinite limit) are refused unless an override file gives
 them; every override applied is named in the output's ``notes``.
 
@@ -22,12 +24,13 @@ never writes a catalogue that the other commands refuse.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import re
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +41,9 @@ from scipy.spatial import ConvexHull, QhullError
 from ._yamlio import MAX_FILE_BYTES, MAX_MAGNITUDE, Fields, _LineLoader, load_yaml
 from .catalog import MAX_ID_LENGTH, catalog_from_fields
 from .exceptions import CatalogError, shorten
-from .modules import MAX_MASS, _physical_inertia, read_assembly_grammar
+from .folder import atomic_path, atomic_write
+from .modules import MAX_MASS, PENDING_MESHES, _physical_inertia, read_assembly_grammar
+from .obstacles._stl import StlError, read_stl, stl_bytes
 from .urdf_assembly import rpy_from_matrix
 
 __all__ = ["import_timor", "TimorImport", "rpy_from_matrix", "fit_capsule", "shape_points"]
@@ -61,10 +66,39 @@ class TimorImport:
     data: dict
     overrides: tuple[str, ...]
     collision: tuple[str, ...]
+    #: The visual meshes as binary STL, by their path relative to the catalogue (``meshes/<db>/``).
+    meshes: dict[str, bytes] = field(default_factory=dict)
 
     def yaml(self) -> str:
         header = "# Converted from a Timor module database by `modular-robots import-timor`; do not edit by hand.\n"
         return header + yaml.safe_dump(self.data, sort_keys=False, width=120)
+
+    def write(self, path: str | Path) -> None:
+        """Write the catalogue to ``path``, its meshes first into ``meshes/<db>/`` beside it (a file
+        there with the same bytes is left alone; its name holds a hash of its content)."""
+        path = Path(path)
+        for name, data in self.meshes.items():
+            target = path.parent / name
+            if not (target.is_file() and target.read_bytes() == data):
+                target.parent.mkdir(parents=True, exist_ok=True)
+                with atomic_path(target) as tmp:
+                    tmp.write_bytes(data)
+        atomic_write(path, self.yaml())
+
+
+class _Meshes:
+    """The visual meshes an import collects: binary STL by path relative to the catalogue."""
+
+    def __init__(self, database: Path):
+        folder = re.sub(r"[^A-Za-z0-9_-]", "_", database.parent.name) or _FALLBACK_NAME
+        self.prefix = f"meshes/{folder}/"
+        self.files: dict[str, bytes] = {}
+
+    def add(self, module_id: str, body_id: str, triangles: np.ndarray) -> str:
+        data = stl_bytes(triangles, f"modular-robots: {module_id} body {body_id}")
+        name = f"{self.prefix}{module_id}_{body_id}-{hashlib.sha256(data).hexdigest()[:10]}.stl"
+        self.files[name] = data
+        return name
 
 
 # -- reading JSON values, each error naming where ------------------------------------------------
@@ -337,6 +371,53 @@ def _collision(body: dict, body_id: str, folder: Path) -> tuple[list[dict], str]
     return shapes, note
 
 
+def _visual_triangles(body: dict, folder: Path) -> list[np.ndarray]:
+    """The body's visual meshes as triangles in the body frame [m]: Timor's STL where the
+    database's folder holds it, else the convex hulls of the pieces of the body's collision mesh
+    (Timor's IMPROV database names visual STL files it does not ship). Primitive visuals are left
+    to the collision shapes, which the URDF draws where a body has no mesh."""
+    out = []
+    for i, geometry in enumerate(_list(_get(body, "visual", []), "visual")):
+        with _within(f"visual[{i}]"):
+            if _get(geometry, "type") != "mesh":
+                continue
+            p = _get(geometry, "parameters", {})
+            name = _text(_get(p, "file"), "parameters.file")
+            pose = _numbers(_get(geometry, "pose", np.eye(4).tolist()), "pose", (4, 4))
+            _pose(pose)
+            scale = _numbers(_get(p, "scale", [1.0, 1.0, 1.0]), "parameters.scale", (3,))
+            if not (scale > 0).all():
+                raise CatalogError(f"parameters.scale: expected 3 numbers > 0, got {scale.tolist()}")
+            source = (folder / name).resolve()
+            if source.is_relative_to(folder.resolve()) and source.is_file():
+                try:
+                    triangles = read_stl(source)[0] * scale
+                except StlError as exc:
+                    raise CatalogError(f"parameters.file: {exc}") from None
+                out.append(triangles @ pose[:3, :3].T + pose[:3, 3])
+                continue
+            out += _collision_hulls(body, folder)
+    return out
+
+
+def _collision_hulls(body: dict, folder: Path) -> list[np.ndarray]:
+    """The triangles of the convex hull of every piece of the body's collision meshes, posed in
+    the body frame, each turned to face outward."""
+    out = []
+    for geometry in _list(_get(body, "collision", []), "collision"):
+        if _get(geometry, "type") != "mesh":
+            continue
+        pose = _numbers(_get(geometry, "pose", np.eye(4).tolist()), "pose", (4, 4))
+        for piece in shape_points(geometry, folder):
+            hull = ConvexHull(piece)
+            corners = piece[hull.simplices]
+            normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+            inward = np.einsum("ij,ij->i", normals, hull.equations[:, :3]) < 0
+            corners[inward] = corners[inward][:, [0, 2, 1]]
+            out.append(corners @ pose[:3, :3].T + pose[:3, 3])
+    return out
+
+
 # -- modules ----------------------------------------------------------------------------------
 def _identifier(text: str) -> str:
     return re.sub(r"\W", "_", str(text))
@@ -420,7 +501,9 @@ def _limits(joint: dict, joint_id: str, override: dict) -> dict:
     return {k: (v if isinstance(v, list) else _number(v, f"limits.{k}")) for k, v in out.items()}
 
 
-def _body(body: dict, module_id: str, folder: Path, overrides: dict, applied: list, notes: list, used: set):
+def _body(
+    body: dict, module_id: str, folder: Path, overrides: dict, applied: list, notes: list, used: set, meshes: _Meshes
+):
     raw_id = _text(_get(body, "ID"), "ID")
     body_id = _identifier(raw_id)
     with _within(f"body {raw_id}"):
@@ -451,6 +534,9 @@ def _body(body: dict, module_id: str, folder: Path, overrides: dict, applied: li
             notes.append(note)
         if shapes:
             entry["collision"] = shapes
+        triangles = _visual_triangles(body, folder)
+        if triangles:
+            entry["visual"] = [{"mesh": meshes.add(module_id, body_id, np.concatenate(triangles))}]
         connectors = []
         for i, c in enumerate(_list(_get(body, "connectors", []), "connectors")):
             with _within(f"connectors[{i}]"):
@@ -458,12 +544,14 @@ def _body(body: dict, module_id: str, folder: Path, overrides: dict, applied: li
     return entry, connectors
 
 
-def _module(m: dict, module_id: str, folder: Path, overrides: dict, applied: list, notes: list, used: set) -> dict:
+def _module(
+    m: dict, module_id: str, folder: Path, overrides: dict, applied: list, notes: list, used: set, meshes: _Meshes
+) -> dict:
     bodies, connectors = [], []
     raw_bodies = _list(_get(m, "bodies"), "bodies")
     _distinct(_ids(raw_bodies, "bodies"), "body ids")
     for body in raw_bodies:
-        entry, found = _body(body, module_id, folder, overrides, applied, notes, used)
+        entry, found = _body(body, module_id, folder, overrides, applied, notes, used, meshes)
         bodies.append(entry)
         connectors += found
     for c in connectors:
@@ -626,8 +714,10 @@ def _check_written(result: TimorImport, path: Path, overrides: Path | None) -> N
             f"{path}: the catalogue would have {size:,} bytes, more than the {MAX_FILE_BYTES:,} a catalogue may have"
         )
     parsed = yaml.load(text, Loader=_LineLoader)  # the loader's own reading (YAML 1.2, line numbers)
+    where = Path("<catalogue>")
+    pending = PENDING_MESHES.set(frozenset(str((where.parent / name).resolve()) for name in result.meshes))
     try:
-        catalog_from_fields(Fields(parsed, Path("<catalogue>"), "", CatalogError))
+        catalog_from_fields(Fields(parsed, where, "", CatalogError))
     except CatalogError as exc:
         message = re.sub(r"^<catalogue>:\d+: ", "", str(exc))
         match = re.match(r"modules\[(\d+)\]\.?(.*)", message)
@@ -636,6 +726,8 @@ def _check_written(result: TimorImport, path: Path, overrides: Path | None) -> N
             raise CatalogError(f"{path}: module {module_id}: {match[2]} (the catalogue loader refuses it)") from None
         source = overrides if overrides is not None and message.startswith(("grammar", "name", "notes")) else path
         raise CatalogError(f"{source}: {message} (the catalogue loader refuses it)") from None
+    finally:
+        PENDING_MESHES.reset(pending)
 
 
 def import_timor(modules_json: str | Path, overrides: str | Path | None = None) -> TimorImport:
@@ -665,13 +757,14 @@ def import_timor(modules_json: str | Path, overrides: str | Path | None = None) 
     applied: list[str] = []
     collision: list[str] = []
     used: set = set()
+    meshes = _Meshes(path)
     out_modules = []
     for m, i in zip(modules, ids):
         if i in removed:
             continue
         with _within(f"{path}: module {i}"):
             try:
-                out_modules.append(_module(m, i, path.parent, keyed, applied, collision, used))
+                out_modules.append(_module(m, i, path.parent, keyed, applied, collision, used, meshes))
             except CatalogError:
                 raise
             except (KeyError, TypeError, ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -697,6 +790,6 @@ def import_timor(modules_json: str | Path, overrides: str | Path | None = None) 
         "grammar": extra.get("grammar", DEFAULT_GRAMMAR),
         "modules": out_modules,
     }
-    result = TimorImport(data, tuple(applied), tuple(collision))
+    result = TimorImport(data, tuple(applied), tuple(collision), meshes.files)
     _check_written(result, path, overrides_path)
     return result

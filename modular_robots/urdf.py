@@ -11,19 +11,31 @@ Movable joints are ``m<i>_<ID>_joint`` (:func:`joint_name`). (General catalogues
 
 from __future__ import annotations
 
+import html
+import re
 from functools import cache, lru_cache
 from importlib import resources
 from pathlib import Path
 from string import Template
+from urllib.parse import unquote, urlparse
 
 from .appearance import visual_shapes
 from .catalog import Catalog, Module
 from .composition import Composition
-from .folder import atomic_write
+from .exceptions import InputError, shorten
+from .folder import atomic_path, atomic_write
 from .urdf_assembly import assembly_urdf
 from .xml_text import xml_attribute, xml_comment
 
-__all__ = ["composition_urdf", "write_urdf", "PAYLOAD_RADIUS", "link_name", "joint_name"]
+__all__ = [
+    "composition_urdf",
+    "write_urdf",
+    "localise_meshes",
+    "is_mesh_copy",
+    "PAYLOAD_RADIUS",
+    "link_name",
+    "joint_name",
+]
 
 PAYLOAD_RADIUS = 0.05
 """Radius of the payload sphere held at ``tool0`` [m] (SPEC §3)."""
@@ -191,7 +203,53 @@ def _payload(mass: float, collision: bool) -> str:
 
 def write_urdf(path: str | Path, composition: Composition, catalog: Catalog, payload: float = 0.0) -> Path:
     """Write :func:`composition_urdf` to ``path`` and return the path: whole or not at all (a full
-    disk leaves no truncated file; :func:`~modular_robots.folder.atomic_write`)."""
+    disk leaves no truncated file; :func:`~modular_robots.folder.atomic_write`); its visual
+    meshes are copied beside it (:func:`localise_meshes`)."""
     path = Path(path)
-    atomic_write(path, composition_urdf(composition, catalog, payload))
+    text, _ = localise_meshes(composition_urdf(composition, catalog, payload), path.parent)
+    atomic_write(path, text)
     return path
+
+
+_MESH_URI = re.compile(r'filename="(file://[^"]*)"')
+_MESH_COPY = re.compile(r"mesh_[A-Za-z0-9._-]+\.stl")
+
+
+def is_mesh_copy(name: str) -> bool:
+    """Whether ``name`` is a visual mesh :func:`localise_meshes` copies beside a URDF."""
+    return _MESH_COPY.fullmatch(name) is not None
+
+
+def localise_meshes(urdf: str, folder: str | Path, prefix: str = "") -> tuple[str, tuple[str, ...]]:
+    """``urdf`` with each visual mesh given as a ``file://`` URI (the catalogue's file) copied into
+    ``folder`` as ``mesh_<file name>`` and named ``prefix + mesh_<file name>``: a relative path
+    beside the URDF by default (``package://<package>/meshes/`` for a ROS package). Returns the
+    text and the copies' names. A copy already there with the same bytes is left alone.
+
+    Raises
+    ------
+    InputError
+        If a mesh file cannot be read (naming it).
+    """
+    folder = Path(folder)
+    copies: dict[str, str] = {}  # uri -> name
+    for uri in dict.fromkeys(_MESH_URI.findall(urdf)):
+        source = Path(unquote(urlparse(html.unescape(uri)).path))
+        stem = re.sub(r"[^A-Za-z0-9._-]", "_", source.name)
+        name = stem if stem.startswith("mesh_") else f"mesh_{stem}"  # a copy copied keeps its name
+        if not name.lower().endswith(".stl"):
+            name += ".stl"
+        while name in copies.values():  # two catalogue files of one name
+            name = f"mesh_{len(copies)}_{stem}"
+        try:
+            data = source.read_bytes()
+        except OSError as exc:
+            raise InputError(f"{source}: cannot read the visual mesh ({shorten(exc, 120, quote=False)})") from None
+        target = folder / name
+        if not (target.is_file() and target.read_bytes() == data):
+            with atomic_path(target) as tmp:
+                tmp.write_bytes(data)
+        copies[uri] = name
+    for uri, name in copies.items():
+        urdf = urdf.replace(f'filename="{uri}"', f'filename="{prefix}{name}"')
+    return urdf, tuple(copies.values())

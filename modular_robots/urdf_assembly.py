@@ -16,14 +16,15 @@ primitive as its ``<visual>`` in the colour of the module's kind.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
-from .appearance import visual_shapes
+from .appearance import material, visual_shapes
 from .catalog import Catalog
 from .composition import Composition
 from .modules import GeneralModule, Pose
-from .xml_text import xml_comment
+from .xml_text import xml_attribute, xml_comment
 
 __all__ = [
     "assembly_urdf",
@@ -88,8 +89,8 @@ def _fixed(name: str, parent: str, child: str, transform: np.ndarray) -> str:
     )
 
 
-def _link(name: str, body=None, collision: bool = True) -> str:
-    inner = ""
+def _link(name: str, body=None, collision: bool = True, kind: str = "link") -> str:
+    inner = _meshes(body, kind) if collision and body is not None else ""
     if body is not None and body.mass > 0:
         ixx, iyy, izz, ixy, ixz, iyz = (repr(float(v)) for v in body.inertia)
         com = " ".join(repr(float(c)) for c in body.com)
@@ -99,6 +100,21 @@ def _link(name: str, body=None, collision: bool = True) -> str:
             "    </inertial>\n"
         )
     return f'  <link name="{name}">\n{inner}  </link>\n'
+
+
+def _meshes(body, kind: str) -> str:
+    """The body's visual meshes, each a ``file://`` URI of the catalogue's STL (a writer that puts
+    the URDF in a folder copies them beside it: :func:`~modular_robots.urdf.localise_meshes`)."""
+    out = ""
+    for visual in body.visual:
+        scale = " ".join(repr(float(c)) for c in visual.scale)
+        uri = xml_attribute(Path(visual.file).as_uri())
+        out += (
+            f"    <visual>\n      {_origin(matrix(visual.pose))}\n"
+            f'      <geometry><mesh filename="{uri}" scale="{scale}"/></geometry>\n'
+            f"      {material(kind)}\n    </visual>\n"
+        )
+    return out
 
 
 def _shapes(link: str, body, collision: bool, kind: str) -> str:
@@ -113,7 +129,8 @@ def _shapes(link: str, body, collision: bool, kind: str) -> str:
         inner = ""
         if collision:
             inner = f"    <collision>\n      <geometry>{geometry}</geometry>\n    </collision>\n"
-            inner += visual_shapes(shape.radius, shape.length, kind)
+            if not body.visual:  # a body with meshes is drawn as its meshes
+                inner += visual_shapes(shape.radius, shape.length, kind)
         out += _fixed(f"{frame}_mount", link, frame, matrix(shape.pose))
         out += f'  <link name="{frame}">\n{inner}  </link>\n'
     return out
@@ -146,7 +163,7 @@ def assembly_urdf(composition: Composition, catalog: Catalog, payload_part: str,
                 )
                 parts.append(_link(frame))
                 parts.append(_fixed(f"{frame}_child", frame, link, matrix(joint.child_pose)))
-            parts.append(_link(link, body, collision))
+            parts.append(_link(link, body, collision, module.kind))
             parts.append(_shapes(link, body, collision, module.kind))
             parent = link
         at = matrix(module.outlet.pose) @ RX_PI

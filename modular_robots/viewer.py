@@ -25,12 +25,14 @@ from .appearance import KIND_COLOURS, KIND_LABELS, colour_of_rgba
 from .exceptions import InputError, shorten
 from .folder import ResultsFolder, atomic_write
 from .obstacles import obstacle_label
+from .obstacles._stl import StlError, read_stl, welded
 from .plan.candidate import CandidateStatus
 from .plan.document import drawn_task, winner_plan_files
 from .plan.records import CandidateRecord, ResultDocument
 from .plan.trajectory import Trajectory
 from .report import read_winner, winner_robot
 from .robot import robot_from_urdf
+from .urdf import is_mesh_copy
 
 __all__ = ["VIEWER", "write_viewer", "write_page", "scene_data", "FRAME_RATE", "HEADLESS_CHROMIUM"]
 
@@ -99,7 +101,9 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
     count = int(min(MAX_FRAMES, max(2, np.ceil(tf * FRAME_RATE) + 1)))
     times = np.linspace(0.0, tf, count)
     qs = trajectory.at(times)[0]
-    links = [link for link in urdf.link_map.values() if link.collisions]
+    painted = any(link.visuals for link in urdf.link_map.values())  # a URDF from before visuals: its shapes
+    links = [link for link in urdf.link_map.values() if (link.visuals if painted else link.collisions)]
+    folder = Path(urdf_path).parent
     frames = []
     for q in qs:
         urdf.update_cfg(dict(zip(joints, q)))
@@ -109,7 +113,10 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
     return {
         "tf": tf,
         "times": _round(times),
-        "links": [{"name": link.name, "color": _colour(link), "shapes": _shapes(link)} for link in links],
+        "links": [
+            {"name": link.name, "color": _colour(link), "shapes": _drawn(link, folder) if painted else _shapes(link)}
+            for link in links
+        ],
         "frames": frames,
         "tool": _round(tool),
         "obstacles": [
@@ -145,6 +152,42 @@ def _shapes(link) -> list[dict]:
         elif geometry.box is not None:
             out.append({"type": "box", "size": [float(v) for v in geometry.box.size], "origin": origin})
     return out
+
+
+def _drawn(link, folder: Path) -> list[dict]:
+    """The link's ``<visual>`` elements in the page's vocabulary: primitives as they are, a mesh
+    (one of the copies beside the URDF, :func:`~modular_robots.urdf.localise_meshes`) as its
+    welded triangles, scaled."""
+    out: list[dict] = []
+    for visual in link.visuals:
+        geometry = visual.geometry
+        origin = _columns(np.eye(4) if visual.origin is None else visual.origin)
+        if geometry.cylinder is not None:
+            out.append({"type": "cylinder", "radius": geometry.cylinder.radius, "length": geometry.cylinder.length})
+        elif geometry.sphere is not None:
+            out.append({"type": "sphere", "radius": geometry.sphere.radius})
+        elif geometry.box is not None:
+            out.append({"type": "box", "size": [float(v) for v in geometry.box.size]})
+        elif geometry.mesh is not None:
+            vertices, faces = welded(_mesh_triangles(folder, geometry.mesh))
+            out.append({"type": "mesh", "vertices": _round(vertices), "faces": faces.tolist()})
+        else:
+            continue
+        out[-1]["origin"] = origin
+    return out
+
+
+def _mesh_triangles(folder: Path, mesh) -> np.ndarray:
+    """The triangles of a visual mesh of the URDF in ``folder``, scaled: only a copy beside it."""
+    name = str(mesh.filename)
+    if not is_mesh_copy(name):
+        raise ValueError(f"visual mesh {shorten(name)}: expected one of the mesh_*.stl copies beside the URDF")
+    try:
+        triangles = read_stl(folder / name)[0]
+    except StlError as exc:
+        raise ValueError(str(exc)) from None
+    scale = np.ones(3) if mesh.scale is None else np.broadcast_to(np.asarray(mesh.scale, dtype=float), 3)
+    return triangles * scale
 
 
 def _colour(link) -> str:

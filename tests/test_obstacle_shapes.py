@@ -20,6 +20,7 @@ from modular_robots.ocp.shooting import ShootingProblem
 from modular_robots.robot import robot_model
 from modular_robots.scenario import OptimizerSettings, load_scenario
 
+from .helpers.browser import CHROMIUM, visit
 from .helpers.models import ARM_GOAL, ARM_START, R_LINK, arm_points, planar_arm
 from .helpers.paths import PAPER_5KG
 
@@ -212,10 +213,8 @@ def test_a_run_among_a_column_and_a_floor_verifies_and_its_page_draws_them(tmp_p
     base: the winner verifies clear of both, ``result.json`` keeps the shapes, and the page
     draws them (no console error in headless Chromium, where .ci/run installs it)."""
     import json
-    import shutil
 
     from modular_robots.pipeline import run_scenario
-    from modular_robots.viewer import HEADLESS_CHROMIUM, VIEWER
 
     from .helpers.paths import SMALL
 
@@ -233,23 +232,8 @@ def test_a_run_among_a_column_and_a_floor_verifies_and_its_page_draws_them(tmp_p
     assert winner is not None and winner.verification.passed and winner.verification.min_clearance >= 0.0
     document = json.loads((out / "result.json").read_text())
     assert [next(iter(o)) for o in document["task"]["obstacles"]] == ["capsule", "plane", "floor"]
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    if chromium is None:
-        return
-    from playwright.sync_api import sync_playwright
-
-    errors: list[str] = []
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=chromium, args=list(HEADLESS_CHROMIUM))
-        try:
-            page = browser.new_page(viewport={"width": 800, "height": 600})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto((out / VIEWER).as_uri())
-            page.wait_for_function("window.viewer && window.viewer.ready", timeout=20_000)
-        finally:
-            browser.close()
-    assert errors == []
+    if CHROMIUM is not None:
+        assert visit(out, tmp_path).errors == []
 
 
 def test_the_nearest_pair_measured_best_first_is_the_smallest_of_all_pairs():

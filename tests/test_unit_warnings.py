@@ -71,7 +71,7 @@ def test_a_general_catalogue_joint_in_degrees_per_second_is_named(tmp_path):
     path.write_text(text[:first] + "velocity: 72.0" + text[first + len("velocity: 1.2566") :])
     with pytest.warns(InputWarning) as caught:
         load_catalog(path)
-    [message] = [str(w.message) for w in caught]
+    [message] = [str(w.message) for w in caught if ".limits." in str(w.message)]  # (its meshes are not copied)
     line = _line(path, "velocity: 72.0")
     assert re.match(rf"{re.escape(str(path))}:{line}: modules\[\d+\]\.joints\[0\]\.limits\.velocity: 72 rad/s", message)
     assert f"{math.radians(72.0):.4g}" in message

@@ -4,7 +4,6 @@ the URDF by an independent forward kinematics) and in a real browser (headless C
 
 from __future__ import annotations
 
-import io
 import json
 import re
 import shutil
@@ -19,12 +18,12 @@ from modular_robots.appearance import KIND_COLOURS
 from modular_robots.cli import main
 from modular_robots.ocp.trajectory import Trajectory
 from modular_robots.pipeline import run_scenario
-from modular_robots.viewer import HEADLESS_CHROMIUM, VIEWER, scene_data
+from modular_robots.viewer import VIEWER, scene_data
 
+from .helpers.browser import CHROMIUM, visit
 from .helpers.paths import ROOT
 
 SMALL = ROOT / "tests" / "data" / "small.yaml"
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.fixture(scope="module")
@@ -112,32 +111,12 @@ def test_the_closest_approach_is_the_verified_clearance(folder):
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no Chromium (.ci/run installs Debian's chromium)")
 def test_the_page_in_headless_chromium(folder, tmp_path):
-    from PIL import Image
-    from playwright.sync_api import sync_playwright
-
-    errors, requests = [], []
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=list(HEADLESS_CHROMIUM))
-        try:
-            page = browser.new_page(viewport={"width": 1200, "height": 760})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.on("request", lambda r: requests.append(r.url))
-            page.goto((folder / VIEWER).as_uri())
-            page.wait_for_function("window.viewer && window.viewer.ready", timeout=20_000)
-            shots = []
-            for t in ("0", "viewer.tf"):
-                page.evaluate(f"viewer.setTime({t})")
-                shots.append(page.locator("#view canvas").screenshot(path=str(tmp_path / f"t{len(shots)}.png")))
-            clock = page.inner_text("#clock")
-        finally:
-            browser.close()
-    assert errors == []
-    assert requests == [(folder / VIEWER).as_uri()]  # the page itself, nothing else
+    seen = visit(folder, tmp_path)
+    assert seen.errors == []
+    assert seen.requests == [(folder / VIEWER).as_uri()]  # the page itself, nothing else
     tf = json.loads((folder / "result.json").read_text())["winner"]["tf"]
-    assert clock == f"{tf:.3f} / {tf:.3f} s"
-    start, end = (np.asarray(Image.open(io.BytesIO(s)).convert("RGB"), dtype=int) for s in shots)
-    for image in (start, end):
+    assert seen.clock == f"{tf:.3f} / {tf:.3f} s"
+    for image in (seen.start, seen.end):
         assert len(np.unique(image.reshape(-1, 3), axis=0)) > 200  # a drawn scene, not a blank canvas
-    moved = np.any(np.abs(start - end) > 30, axis=2).mean()
+    moved = np.any(np.abs(seen.start - seen.end) > 30, axis=2).mean()
     assert moved > 0.01, moved  # the robot's pixels moved between t = 0 and tf

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_stl", "MAX_TRIANGLES", "MAX_BYTES", "StlError"]
+__all__ = ["read_stl", "stl_bytes", "welded", "MAX_TRIANGLES", "MAX_BYTES", "StlError"]
 
 #: The most triangles a mesh obstacle may have: each distance query bounds its distance to every
 #: triangle (NumPy, about 0.1 ms a thousand), so a larger mesh is better decimated.
@@ -63,6 +63,25 @@ def read_stl(path: Path) -> tuple[np.ndarray, str]:
         text = b" ".join(bad).decode(errors="replace")
         raise StlError(f"{path}: a vertex that is not three numbers: {text!r:.80}") from None
     return _checked(corners.reshape(-1, 3, 3), path), hashlib.sha256(data).hexdigest()
+
+
+def stl_bytes(triangles: np.ndarray, header: str = "modular-robots") -> bytes:
+    """Binary STL of ``triangles`` ``(T, 3, 3)`` (corners counter-clockwise seen from outside;
+    normals from them), the record :func:`read_stl` reads."""
+    corners = np.asarray(triangles, dtype=float).reshape(-1, 3, 3)
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    lengths = np.linalg.norm(normals, axis=1, keepdims=True)
+    records = np.zeros(len(corners), _BINARY_RECORD)
+    records["normal"] = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
+    records["corners"] = corners
+    return header.encode()[:80].ljust(80, b" ") + len(corners).to_bytes(4, "little") + records.tobytes()
+
+
+def welded(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (V, 3), faces (T, 3))`` of ``triangles`` ``(T, 3, 3)``, equal corners made one
+    vertex: what a renderer takes."""
+    vertices, faces = np.unique(np.asarray(triangles, dtype=float).reshape(-1, 3), axis=0, return_inverse=True)
+    return vertices, faces.reshape(-1, 3)
 
 
 def _checked(triangles: np.ndarray, path: Path) -> np.ndarray:

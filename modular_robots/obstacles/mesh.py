@@ -33,7 +33,7 @@ import numpy as np
 
 from ._geometry import pose_columns, rpy_matrix
 from ._json import json_number, json_vector
-from ._stl import StlError, read_stl
+from ._stl import StlError, read_stl, welded
 from ._triangles import closest_on_triangles, segment_crossings, segment_triangles, winding_numbers
 from .base import Obstacle, Witness, members
 from .box import BoxObstacle
@@ -219,8 +219,7 @@ class MeshObstacle:
         """The welded triangles in the mesh's frame, scaled; grown along the vertex normals."""
         g = self._geometry
         local = (np.stack([g.a, g.b, g.c], 1) - self.position) @ rpy_matrix(self.rpy)
-        vertices, faces = np.unique(local.reshape(-1, 3), axis=0, return_inverse=True)
-        faces = faces.reshape(-1, 3)
+        vertices, faces = welded(local)
         if grow:
             normals = np.zeros_like(vertices)
             for corner in range(3):  # area-weighted, outward
