@@ -188,7 +188,8 @@ def _lockstep(
     for iteration in range(1, max_iterations + 1):
         jacobians, positions = _frame_jacobians(frames, q)
         error_vectors = targets - positions
-        errors = np.sqrt(np.vecdot(error_vectors, error_vectors)).tolist()
+        error_array = np.sqrt(np.vecdot(error_vectors, error_vectors))
+        errors = error_array.tolist()
         rows = []
         for row, (run, error) in enumerate(zip(running, errors)):
             since_best[run] = 0 if error < best_error[run] * stall_ratio else since_best[run] + 1
@@ -201,14 +202,10 @@ def _lockstep(
         if not rows:
             break
         if len(rows) < len(q):
-            q, jacobians, error_vectors = q[rows], jacobians[rows], error_vectors[rows]
+            q, jacobians, error_vectors, error_array = q[rows], jacobians[rows], error_vectors[rows], error_array[rows]
             lower, upper, targets = lower[rows], upper[rows], targets[rows]
-            frames, errors, running = (
-                [frames[row] for row in rows],
-                [errors[row] for row in rows],
-                [running[row] for row in rows],
-            )
-        q = _lm_iteration(q, lower, upper, jacobians[:, :3], error_vectors.tolist(), errors)
+            frames, running = [frames[row] for row in rows], [running[row] for row in rows]
+        q = _lm_iteration(q, lower, upper, jacobians[:, :3], error_vectors, error_array)
     results = iter([IKResult(best_q[run].copy(), best_error[run], iterations[run]) for run in range(count)])
     return [list(itertools.islice(results, len(start))) for start in starts]
 
@@ -229,8 +226,8 @@ def _lm_iteration(
     lower: np.ndarray,
     upper: np.ndarray,
     jacobians: np.ndarray,
-    error_vectors: list[list[float]],
-    errors: list[float],
+    error_vectors: np.ndarray,
+    errors: np.ndarray,
 ) -> np.ndarray:
     """The next configuration of every run ``(K, nq)``: the Levenberg-Marquardt step of its
     position Jacobian ``(K, 3, nv)``, except that joints at a limit which the step would push
@@ -250,8 +247,8 @@ def _free_steps(
     rows: list[int],
     free: np.ndarray,
     jacobians: np.ndarray,
-    error_vectors: list[list[float]],
-    errors: list[float],
+    error_vectors: np.ndarray,
+    errors: np.ndarray,
 ) -> None:
     """Write into ``step`` the Levenberg-Marquardt step of the Jacobian ``J[:, free]`` of the
     runs ``rows`` (``free``: their free joints, one row each).
@@ -272,55 +269,41 @@ def _free_steps(
         end = start + size * len(members)
         if size:
             stacked = blocks[start:end].reshape(len(members), size, 3).mT
-            found = _lm_steps(stacked, [error_vectors[i] for i in members], [errors[i] for i in members])
+            found = _lm_steps(stacked, error_vectors[members], errors[members])
             steps.append(found.ravel())
         start = end
     if steps:
         step[runs, joints] = np.concatenate(steps)
 
 
-def _lm_steps(jacobians: np.ndarray, error_vectors: list[list[float]], errors: list[float]) -> np.ndarray:
+def _lm_steps(jacobians: np.ndarray, error_vectors: np.ndarray, errors: np.ndarray) -> np.ndarray:
     """Levenberg-Marquardt steps ``(J^T J + w I)^-1 J^T e`` with ``w = |e|^2 / 2 + 1e-4``
     (Sugihara 2011), in their 3 x 3 dual form ``J^T (J J^T + w I)^-1 e``, of every run: Jacobians
-    ``(K, 3, nv)``, error vectors ``e`` and errors ``|e|``; steps ``(K, nv)``."""
-    solutions = [
-        _dual_solve(products, error_vector, error)
-        for products, error_vector, error in zip((jacobians @ jacobians.mT).tolist(), error_vectors, errors)
-    ]
-    degenerate = [row for row, solution in enumerate(solutions) if solution is None]
-    for row in degenerate:
-        solutions[row] = (0.0, 0.0, 0.0)
-    steps = (jacobians.mT @ np.array(solutions)[:, :, None])[:, :, 0]
-    if degenerate:
-        steps[degenerate] = 0.0
-    return steps
+    ``(K, 3, nv)``, error vectors ``e`` ``(K, 3)`` and errors ``|e|`` ``(K,)``; steps ``(K, nv)``.
 
-
-def _dual_solve(
-    products: list[list[float]], error_vector: list[float], error: float
-) -> tuple[float, float, float] | None:
-    """``(J J^T + w I)^-1 e`` from ``J J^T`` (its upper triangle is read), ``e`` and ``|e|``;
-    None for a system that is not positive definite, which only absurd geometry (metres beyond
-    1e8) gives: no step rather than a crash.
-
-    The symmetric positive definite 3 x 3 system is solved by Cramer's rule on scalars: this
-    runs millions of times in step B and numpy's general solver costs more than the arithmetic
-    (``tests/test_feasibility.py`` checks it against the plain normal equations).
+    The symmetric positive definite 3 x 3 systems are solved by Cramer's rule, all runs at once
+    (each operation is one array operation over the runs, in the order a scalar Cramer's rule
+    takes: the same floating-point results; ``tests/test_feasibility.py`` checks them against
+    the plain normal equations). A system that is not positive definite, which only absurd
+    geometry (metres beyond 1e8) gives, gets no step rather than a crash.
     """
-    damping = 0.5 * error * error + 1e-4
-    (a, b, c), (_, d, e), (_, _, f) = products
-    a += damping
-    d += damping
-    f += damping
-    x, y, z = error_vector
+    products = jacobians @ jacobians.mT
+    damping = 0.5 * errors * errors + 1e-4
+    a, b, c = products[:, 0, 0] + damping, products[:, 0, 1], products[:, 0, 2]
+    d, e, f = products[:, 1, 1] + damping, products[:, 1, 2], products[:, 2, 2] + damping
+    x, y, z = error_vectors[:, 0], error_vectors[:, 1], error_vectors[:, 2]
     co_a, co_b, co_c = d * f - e * e, c * e - b * f, b * e - c * d
     det = a * co_a + b * co_b + c * co_c
-    if not det > 0.0:
-        return None
-    u = (co_a * x + co_b * y + co_c * z) / det
-    v = (co_b * x + (a * f - c * c) * y + (b * c - a * e) * z) / det
-    w = (co_c * x + (b * c - a * e) * y + (a * d - b * b) * z) / det
-    return u, v, w
+    solvable = det > 0.0
+    det = np.where(solvable, det, 1.0)
+    solutions = np.empty((len(det), 3, 1))
+    solutions[:, 0, 0] = (co_a * x + co_b * y + co_c * z) / det
+    solutions[:, 1, 0] = (co_b * x + (a * f - c * c) * y + (b * c - a * e) * z) / det
+    solutions[:, 2, 0] = (co_c * x + (b * c - a * e) * y + (a * d - b * b) * z) / det
+    steps = (jacobians.mT @ solutions)[:, :, 0]
+    if not solvable.all():
+        steps[~solvable] = 0.0
+    return steps
 
 
 def distinct(solutions: Iterator[np.ndarray], atol: float = 1e-3) -> list[np.ndarray]:

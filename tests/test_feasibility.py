@@ -153,8 +153,16 @@ def test_lm_step_matches_the_plain_normal_equations():
         damping = 0.5 * norm * norm + 1e-4
         reference = np.linalg.solve(jacobian.T @ jacobian + damping * np.eye(n), jacobian.T @ error)
         np.testing.assert_allclose(
-            _lm_steps(jacobian[None], [error.tolist()], [norm])[0], reference, rtol=1e-10, atol=1e-13
+            _lm_steps(jacobian[None], error[None], np.array([norm]))[0], reference, rtol=1e-10, atol=1e-13
         )
+    # many at once, one of them singular (no step), the others as each alone
+    jacobians, errors = rng.normal(size=(9, 3, 4)), rng.normal(size=(9, 3))
+    jacobians[4] = np.nan
+    norms = np.linalg.norm(errors, axis=1)
+    together = _lm_steps(jacobians, errors, norms)
+    assert np.all(together[4] == 0.0)
+    for k in (0, 3, 8):
+        assert np.array_equal(together[k], _lm_steps(jacobians[k : k + 1], errors[k : k + 1], norms[k : k + 1])[0])
 
 
 # -- collision -----------------------------------------------------------------------------------
