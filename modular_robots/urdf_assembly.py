@@ -16,6 +16,7 @@ primitive as its ``<visual>`` in the colour of the module's kind.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -140,36 +141,53 @@ def assembly_urdf(composition: Composition, catalog: Catalog, payload_part: str,
     """The URDF body of ``composition`` of a general catalogue up to ``tool0``, followed by
     ``payload_part`` (the payload's URDF, mounted on ``tool0``)."""
     parts = ['  <link name="base_link"/>\n']
-    parent, at = "base_link", RX_PI  # the previous outlet (in ``parent``) composed with Rx(pi)
+    previous: GeneralModule | None = None
     for index, module_id in enumerate(composition.modules):
         module = catalog.general_module(module_id)
-        parts.append(f"  <!-- {xml_comment(f'module {index}: {module.id} ({module.kind})')} -->\n")
-        for body, joint in module.chain():
-            link = body_link(index, module, body.id)
-            if joint is None:
-                mount = at @ np.linalg.inv(matrix(module.inlet.pose))
-                parts.append(_fixed(f"{link}_mount", parent, link, mount))
-            else:
-                frame = f"m{index}_{module.id}_{joint.id}"
-                lim, drive = joint, joint.drive
-                parts.append(
-                    f'  <joint name="{joint_name(index, module, joint.id)}" type="{joint.type}">\n'
-                    f'    <parent link="{parent}"/>\n'
-                    f'    <child link="{frame}"/>\n    {_origin(matrix(joint.parent_pose))}\n'
-                    '    <axis xyz="0 0 1"/>\n'
-                    f'    <limit lower="{lim.lower!r}" upper="{lim.upper!r}" velocity="{lim.velocity!r}" '
-                    f'effort="{lim.effort!r}"/>\n'
-                    f'    <dynamics damping="{drive.viscous!r}" friction="{drive.coulomb!r}"/>\n  </joint>\n'
-                )
-                parts.append(_link(frame))
-                parts.append(_fixed(f"{frame}_child", frame, link, matrix(joint.child_pose)))
-            parts.append(_link(link, body, collision, module.kind))
-            parts.append(_shapes(link, body, collision, module.kind))
-            parent = link
-        at = matrix(module.outlet.pose) @ RX_PI
+        parts.append(_module_urdf(index, module, previous, collision))
+        previous = module
+    parent, at = _entry(len(composition.modules), previous)
     parts.append(_fixed("tool0_mount", parent, "tool0", at @ RX_PI))
     parts.append('  <link name="tool0"/>\n')
     parts.append(payload_part)
+    return "".join(parts)
+
+
+def _entry(index: int, previous: GeneralModule | None) -> tuple[str, np.ndarray]:
+    """Where the module at ``index`` is mounted: the link of the ``previous`` module's outlet body
+    (``base_link`` for the first) and that outlet composed with ``Rx(pi)``, in it."""
+    if previous is None:
+        return "base_link", RX_PI
+    return body_link(index - 1, previous, previous.outlet.body), matrix(previous.outlet.pose) @ RX_PI
+
+
+@lru_cache(maxsize=4096)  # step B builds thousands of chains from a few modules in a few places
+def _module_urdf(index: int, module: GeneralModule, previous: GeneralModule | None, collision: bool) -> str:
+    """The URDF of the module at ``index`` in a chain, after ``previous`` (None: the first)."""
+    parent, at = _entry(index, previous)
+    parts = [f"  <!-- {xml_comment(f'module {index}: {module.id} ({module.kind})')} -->\n"]
+    for body, joint in module.chain():
+        link = body_link(index, module, body.id)
+        if joint is None:
+            mount = at @ np.linalg.inv(matrix(module.inlet.pose))
+            parts.append(_fixed(f"{link}_mount", parent, link, mount))
+        else:
+            frame = f"m{index}_{module.id}_{joint.id}"
+            lim, drive = joint, joint.drive
+            parts.append(
+                f'  <joint name="{joint_name(index, module, joint.id)}" type="{joint.type}">\n'
+                f'    <parent link="{parent}"/>\n'
+                f'    <child link="{frame}"/>\n    {_origin(matrix(joint.parent_pose))}\n'
+                '    <axis xyz="0 0 1"/>\n'
+                f'    <limit lower="{lim.lower!r}" upper="{lim.upper!r}" velocity="{lim.velocity!r}" '
+                f'effort="{lim.effort!r}"/>\n'
+                f'    <dynamics damping="{drive.viscous!r}" friction="{drive.coulomb!r}"/>\n  </joint>\n'
+            )
+            parts.append(_link(frame))
+            parts.append(_fixed(f"{frame}_child", frame, link, matrix(joint.child_pose)))
+        parts.append(_link(link, body, collision, module.kind))
+        parts.append(_shapes(link, body, collision, module.kind))
+        parent = link
     return "".join(parts)
 
 
