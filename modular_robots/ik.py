@@ -308,12 +308,14 @@ def _lm_steps(jacobians: np.ndarray, error_vectors: np.ndarray, errors: np.ndarr
 
 def distinct(solutions: Iterator[np.ndarray], atol: float = 1e-3) -> list[np.ndarray]:
     """Drop configurations within ``atol`` (max norm) of an earlier one (configurations are
-    finite; compared as Python floats, which costs less than numpy on a few joints)."""
-    kept: list[np.ndarray] = []
-    kept_values: list[list[float]] = []
-    for q in solutions:
-        values = q.tolist()
-        if all(any(abs(a - b) > atol for a, b in zip(values, other)) for other in kept_values):
-            kept.append(q)
-            kept_values.append(values)
-    return kept
+    finite): which pairs are apart is one array operation, the greedy pass plain Python."""
+    found = list(solutions)
+    if len(found) < 2:
+        return found
+    rows = np.array(found)
+    apart = (np.abs(rows[:, None, :] - rows[None, :, :]) > atol).any(axis=2).tolist()
+    kept: list[int] = []
+    for i, row in enumerate(apart):
+        if all(row[j] for j in kept):
+            kept.append(i)
+    return [found[i] for i in kept]

@@ -209,13 +209,21 @@ def assembly_reach(composition: Composition, catalog: Catalog) -> float:
     each prismatic joint's largest stroke; the base's inlet sits at the origin."""
     total = 0.0
     for module_id in composition.modules:
-        module = catalog.general_module(module_id)
-        entry = matrix(module.inlet.pose)[:3, 3]  # the inlet, in the inlet body
-        for _, joint in module.chain()[1:]:
-            assert joint is not None  # only the chain's first body has no joint
-            total += float(np.linalg.norm(matrix(joint.parent_pose)[:3, 3] - entry))
-            if joint.type == "prismatic":
-                total += max(abs(joint.lower), abs(joint.upper))
-            entry = np.linalg.inv(matrix(joint.child_pose))[:3, 3]  # the joint origin, in the child body
-        total += float(np.linalg.norm(matrix(module.outlet.pose)[:3, 3] - entry))
+        for term in _reach_terms(catalog.general_module(module_id)):
+            total += term
     return total
+
+
+@lru_cache(maxsize=1024)
+def _reach_terms(module: GeneralModule) -> tuple[float, ...]:
+    """A module's terms of :func:`assembly_reach`, in chain order (added one by one there)."""
+    terms = []
+    entry = matrix(module.inlet.pose)[:3, 3]  # the inlet, in the inlet body
+    for _, joint in module.chain()[1:]:
+        assert joint is not None  # only the chain's first body has no joint
+        terms.append(float(np.linalg.norm(matrix(joint.parent_pose)[:3, 3] - entry)))
+        if joint.type == "prismatic":
+            terms.append(max(abs(joint.lower), abs(joint.upper)))
+        entry = np.linalg.inv(matrix(joint.child_pose))[:3, 3]  # the joint origin, in the child body
+    terms.append(float(np.linalg.norm(matrix(module.outlet.pose)[:3, 3] - entry)))
+    return tuple(terms)
