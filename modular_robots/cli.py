@@ -526,6 +526,11 @@ def export_command(results: Path, rate: float, ros2_folder: Path | None, goal_ra
     contract and a ROS JointTrajectory JSON; with --ros2, a ROS 2 package that plays it."""
     if ros2_folder is not None:
         bundle = write_ros2_bundle(results, ros2_folder, rate, goal_rate)
+        if bundle.goal_rate < goal_rate:
+            click.echo(
+                f"the goal holds {bundle.goal_rate:.3g} points per second, not {goal_rate:g}: more would not fit "
+                "one command-line argument of ros2 action send_goal"
+            )
         click.echo(f"wrote the ROS 2 package {bundle.package} to {bundle.folder} (its README.md says how to play it)")
         return
     files = export_controller_rate(results, rate)

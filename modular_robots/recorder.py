@@ -35,9 +35,9 @@ from .plan.document import (
 )
 from .plan.records import WinnerFiles
 from .plan.tracking import Tracking
-from .report import WINNER_FILES, is_export, write_pruning_plot, write_winner_files
+from .report import URDF, WINNER_FILES, is_export, write_pruning_plot, write_winner_files
 from .scenario import Scenario
-from .urdf import is_mesh_copy
+from .urdf import is_mesh_copy, mesh_copies_named
 from .viewer import VIEWER, write_page
 
 __all__ = ["RunRecorder", "RESULT", "STATUSES", "previous_files"]
@@ -224,7 +224,7 @@ class RunRecorder:
 def previous_files(folder: Path) -> list[str]:
     """The files a previous run of this package left in ``folder``, which a new run removes:
     the winner's files its ``result.json`` names, controller-rate exports of that winner and the
-    visual meshes beside its URDF.
+    visual meshes its URDF names (copies beside it: :func:`~modular_robots.urdf.localise_meshes`).
 
     Only names this package writes are ever returned, and only when ``result.json`` is one of ours:
     a folder of the user's keeps its ``joints.png``, and a forged ``result.json`` that names
@@ -234,7 +234,11 @@ def previous_files(folder: Path) -> list[str]:
     names = [n for n in (*WINNER_FILES, VIEWER) if n in named]
     if names:
         with contextlib.suppress(OSError):
-            names += sorted(p.name for p in folder.iterdir() if is_export(p.name) or is_mesh_copy(p.name))
+            names += sorted(p.name for p in folder.iterdir() if is_export(p.name))
+    if URDF in names:
+        with contextlib.suppress(OSError, UnicodeDecodeError):
+            if (folder / URDF).is_file() and (folder / URDF).stat().st_size <= MAX_URDF_BYTES:
+                names += mesh_copies_named((folder / URDF).read_text(encoding="utf-8"))
     return names
 
 
@@ -248,6 +252,10 @@ def _check_replaceable(folder: Path) -> None:
                 f"{shorten(path, 200, quote=False)}: expected a file a run may replace (or nothing), got a folder, "
                 "device or pipe; remove it or choose another folder (--out)"
             )
+
+
+#: The largest previous ``winner.urdf`` read for the meshes it names [bytes].
+MAX_URDF_BYTES = 50_000_000
 
 
 def _mesh_copies(folder: Path) -> list[str]:

@@ -22,6 +22,7 @@ import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from xml.etree import ElementTree
 from xml.sax.saxutils import escape
 
 import numpy as np
@@ -39,6 +40,9 @@ __all__ = ["Ros2Bundle", "write_ros2_bundle", "package_name", "GOAL_TOLERANCE", 
 GOAL_TOLERANCE = (0.01, 0.05)
 #: ``path_tolerance`` per joint on the way [rad | m].
 PATH_TOLERANCE = 0.05
+#: The largest ``goal.yaml`` [bytes]: Linux takes at most 128 KiB in one command-line argument,
+#: and the README's ``ros2 action send_goal`` passes the goal as one.
+MAX_GOAL_BYTES = 120_000
 #: How long after the plan's end the goal may still be reached [s].
 GOAL_TIME_TOLERANCE = 0.5
 #: The mark in ``package.xml`` by which a folder is known as a bundle this tool may replace.
@@ -59,12 +63,16 @@ _FILES = (
 @dataclass(frozen=True)
 class Ros2Bundle:
     """What :func:`write_ros2_bundle` wrote: the folder, the ROS package's name, the movable
-    joints (the URDF's, in ``q`` order) and the files (paths relative to the folder)."""
+    joints (the URDF's, in ``q`` order), the files (paths relative to the folder) and the goal's
+    rate."""
 
     folder: Path
     package: str
     joints: tuple[str, ...]
     files: tuple[str, ...]
+    #: Points per second of the goal [Hz]: the rate asked for, or lower if its YAML would not fit
+    #: one command-line argument.
+    goal_rate: float = 100.0
 
 
 def package_name(folder: Path) -> str:
@@ -95,7 +103,9 @@ def write_ros2_bundle(
         The controller manager's ``update_rate`` [Hz] (rounded to a whole number, as its
         parameter is an integer).
     goal_rate
-        Points per second of the goal's trajectory [Hz] (the controller interpolates between them).
+        Points per second of the goal's trajectory [Hz] (the controller interpolates between them);
+        lowered as far as the goal's YAML needs to fit one command-line argument
+        (:data:`MAX_GOAL_BYTES`).
 
     Raises
     ------
@@ -113,42 +123,69 @@ def write_ros2_bundle(
     joints = tuple(robot.joint_names)
     package = package_name(out)
     urdf, meshes = _with_package_meshes(urdf, results, out, package)
-    goal = follow_joint_trajectory_goal(controller_rate(trajectory, robot, goal_rate), list(joints))
+    goal, goal_rate = _fitting_goal(trajectory, robot, list(joints), goal_rate)
+    composition = document.winner.composition if document.winner else ""
     texts = {
         "package.xml": _package_xml(package),
         "CMakeLists.txt": _cmake(package, bool(meshes)),
         "urdf/robot.urdf": with_ros2_control(urdf, joints, trajectory.q[0]),
         "config/controllers.yaml": yaml.safe_dump(controllers(joints, rate), sort_keys=False),
-        "config/goal.yaml": yaml.safe_dump(goal, sort_keys=False, width=1000),
+        "config/goal.yaml": _goal_yaml(goal),
         "config/goal.json": json.dumps(goal) + "\n",
         "config/view.rviz": _RVIZ,
         "launch/play.launch.py": _LAUNCH.replace("PACKAGE", package),
-        "README.md": _readme(package, document.winner.composition if document.winner else "", trajectory, rate),
+        "README.md": _readme(package, composition, trajectory, rate, goal_rate),
     }
     for name in _FILES:
         path = out / name
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(path, texts[name])
-    return Ros2Bundle(out, package, joints, (*_FILES, *(f"meshes/{name}" for name in meshes)))
+    return Ros2Bundle(out, package, joints, (*_FILES, *(f"meshes/{name}" for name in meshes)), goal_rate)
+
+
+def _goal_yaml(goal: dict) -> str:
+    return yaml.safe_dump(goal, sort_keys=False, width=1000, default_flow_style=None)
+
+
+def _fitting_goal(trajectory: Trajectory, robot, joints: list[str], rate: float) -> tuple[dict, float]:
+    """The goal at ``rate`` points per second [Hz], or at the highest lower rate whose YAML fits
+    one command-line argument (:data:`MAX_GOAL_BYTES`: the README passes it to ``ros2 action
+    send_goal``); and that rate."""
+    for _ in range(8):
+        goal = follow_joint_trajectory_goal(controller_rate(trajectory, robot, rate), joints)
+        size = len(_goal_yaml(goal).encode())
+        if size <= MAX_GOAL_BYTES:
+            return goal, rate
+        rate *= 0.95 * MAX_GOAL_BYTES / size
+    raise InputError(f"the plan's goal does not fit {MAX_GOAL_BYTES:,} bytes even at {rate:.3g} points per second")
 
 
 def _with_package_meshes(urdf: str, results: Path, out: Path, package: str) -> tuple[str, tuple[str, ...]]:
-    """The URDF with its visual meshes (copies beside ``winner.urdf``) copied into ``out/meshes``
-    and named ``package://<package>/meshes/...``, as RViz resolves them."""
-
-    def absolute(match: re.Match) -> str:
-        name = match[1]
-        if not is_mesh_copy(name):
+    """The URDF with its visual meshes (the copies beside ``winner.urdf``) copied into
+    ``out/meshes`` and named ``package://<package>/meshes/...``, as RViz resolves them; the
+    folder's meshes of an earlier bundle that this one does not name are removed. A file name
+    that is not such a copy (a path, a link, a URI) is refused before anything is written."""
+    named = [
+        element.get("filename", "") for element in ElementTree.fromstring(urdf).iter() if "filename" in element.attrib
+    ]
+    for name in named:
+        path = results / name
+        if not is_mesh_copy(name) or path.is_symlink() or not path.is_file():
             raise InputError(
-                f"{results / 'winner.urdf'}: visual mesh {name!r:.80}: expected a mesh_*.stl copy beside it"
+                f"{results / 'winner.urdf'}: mesh {name!r:.80}: expected a mesh_*.stl file beside it (not a link)"
             )
-        return f'filename="{(results / name).resolve().as_uri()}"'
-
-    text = re.sub(r'filename="([^"]*)"', absolute, urdf)
-    (out / "meshes").mkdir(parents=True, exist_ok=True)
-    text, names = localise_meshes(text, out / "meshes", f"package://{package}/meshes/")
-    if not names:
-        (out / "meshes").rmdir()
+    uris = {name: (results / name).resolve().as_uri() for name in named}
+    text = re.sub(r"filename=([\"'])(.*?)\1", lambda m: f'filename="{uris[m[2]]}"', urdf)
+    folder = out / "meshes"
+    names: tuple[str, ...] = ()
+    if uris:
+        text, names = localise_meshes(text, folder, f"package://{package}/meshes/")
+    if folder.is_dir():
+        for stale in folder.iterdir():
+            if is_mesh_copy(stale.name) and stale.name not in names and not stale.is_symlink():
+                stale.unlink()
+        if not any(folder.iterdir()):
+            folder.rmdir()
     return text, names
 
 
@@ -242,6 +279,8 @@ def _package_xml(package: str) -> str:
         "joint_state_broadcaster",
         "joint_trajectory_controller",
         "control_msgs",
+        "ament_index_python",
+        "launch",
         "launch_ros",
         "rviz2",
     )
@@ -267,7 +306,7 @@ def _cmake(package: str, meshes: bool) -> str:
     )
 
 
-def _readme(package: str, composition: str, trajectory: Trajectory, rate: float) -> str:
+def _readme(package: str, composition: str, trajectory: Trajectory, rate: float, goal_rate: float) -> str:
     tf = float(trajectory.t[-1])
     return f"""# {package}
 
@@ -285,7 +324,8 @@ ros2 action send_goal /joint_trajectory_controller/follow_joint_trajectory \\
 The second starts `robot_state_publisher`, the controller manager at {round(rate)} Hz with
 `joint_state_broadcaster` and `joint_trajectory_controller`, and RViz (`rviz:=false` without it);
 the third plays the plan. Positions in rad (m for a prismatic joint), times in s. The goal holds
-the plan's positions, velocities and accelerations; its torques [N m | N] are in `export`'s
+the plan's positions, velocities and accelerations {goal_rate:.3g} times a second (the controller
+interpolates between them); its torques [N m | N] are in `export`'s
 `trajectory_<rate>hz.json` of the results folder. For a real robot, replace the `<plugin>` of
 `urdf/robot.urdf`'s `<ros2_control>` block with its hardware's.
 """

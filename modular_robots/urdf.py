@@ -11,6 +11,7 @@ Movable joints are ``m<i>_<ID>_joint`` (:func:`joint_name`). (General catalogues
 
 from __future__ import annotations
 
+import hashlib
 import html
 import re
 from functools import cache, lru_cache
@@ -24,6 +25,7 @@ from .catalog import Catalog, Module
 from .composition import Composition
 from .exceptions import InputError, shorten
 from .folder import atomic_path, atomic_write
+from .obstacles._stl import MAX_VISUAL_TRIANGLES, StlError, read_stl
 from .urdf_assembly import assembly_urdf
 from .xml_text import xml_attribute, xml_comment
 
@@ -32,6 +34,8 @@ __all__ = [
     "write_urdf",
     "localise_meshes",
     "is_mesh_copy",
+    "mesh_copies_named",
+    "mesh_copy_name",
     "PAYLOAD_RADIUS",
     "link_name",
     "joint_name",
@@ -213,6 +217,7 @@ def write_urdf(path: str | Path, composition: Composition, catalog: Catalog, pay
 
 _MESH_URI = re.compile(r'filename="(file://[^"]*)"')
 _MESH_COPY = re.compile(r"mesh_[A-Za-z0-9._-]+\.stl")
+_NAMED_COPY = re.compile(r'filename="(mesh_[^"]*)"')
 
 
 def is_mesh_copy(name: str) -> bool:
@@ -220,36 +225,54 @@ def is_mesh_copy(name: str) -> bool:
     return _MESH_COPY.fullmatch(name) is not None
 
 
+def mesh_copies_named(urdf: str) -> list[str]:
+    """The mesh copies (:func:`is_mesh_copy`) a URDF written by :func:`localise_meshes` names."""
+    return sorted({name for name in _NAMED_COPY.findall(urdf) if is_mesh_copy(name)})
+
+
+def mesh_copy_name(file_name: str, data: bytes) -> str:
+    """``mesh_<name>-<hash>.stl``: a copy's name holds the first ten hexadecimal digits of its
+    bytes' SHA-256, so two meshes never share a name (an imported mesh's name has them already)."""
+    digest = hashlib.sha256(data).hexdigest()[:10]
+    stem = re.sub(r"[^A-Za-z0-9._-]", "_", file_name)
+    stem = re.sub(r"\.stl$", "", stem, flags=re.IGNORECASE).removeprefix("mesh_")
+    return f"mesh_{stem if stem.endswith(f'-{digest}') else f'{stem}-{digest}'}.stl"
+
+
 def localise_meshes(urdf: str, folder: str | Path, prefix: str = "") -> tuple[str, tuple[str, ...]]:
     """``urdf`` with each visual mesh given as a ``file://`` URI (the catalogue's file) copied into
-    ``folder`` as ``mesh_<file name>`` and named ``prefix + mesh_<file name>``: a relative path
-    beside the URDF by default (``package://<package>/meshes/`` for a ROS package). Returns the
-    text and the copies' names. A copy already there with the same bytes is left alone.
+    ``folder`` (:func:`mesh_copy_name`) and named ``prefix + <copy>``: a relative path beside the
+    URDF by default (``package://<package>/meshes/`` for a ROS package). Returns the text and the
+    copies' names. Every mesh is read and checked before any is written; a copy already there
+    with the same bytes is left alone, and a different file of its name is never replaced.
 
     Raises
     ------
     InputError
-        If a mesh file cannot be read (naming it).
+        If a mesh is not a readable STL file (naming it), or ``folder`` holds a different file
+        under a copy's name.
     """
     folder = Path(folder)
-    copies: dict[str, str] = {}  # uri -> name
+    copies: dict[str, tuple[str, bytes]] = {}  # uri -> (name, bytes)
     for uri in dict.fromkeys(_MESH_URI.findall(urdf)):
         source = Path(unquote(urlparse(html.unescape(uri)).path))
-        stem = re.sub(r"[^A-Za-z0-9._-]", "_", source.name)
-        name = stem if stem.startswith("mesh_") else f"mesh_{stem}"  # a copy copied keeps its name
-        if not name.lower().endswith(".stl"):
-            name += ".stl"
-        while name in copies.values():  # two catalogue files of one name
-            name = f"mesh_{len(copies)}_{stem}"
         try:
+            read_stl(source, MAX_VISUAL_TRIANGLES)
             data = source.read_bytes()
-        except OSError as exc:
-            raise InputError(f"{source}: cannot read the visual mesh ({shorten(exc, 120, quote=False)})") from None
+        except (StlError, OSError) as exc:
+            raise InputError(f"visual mesh: {shorten(exc, 200, quote=False)}") from None
+        copies[uri] = (mesh_copy_name(source.name, data), data)
+    write = []
+    for name, data in copies.values():
         target = folder / name
-        if not (target.is_file() and target.read_bytes() == data):
-            with atomic_path(target) as tmp:
-                tmp.write_bytes(data)
-        copies[uri] = name
-    for uri, name in copies.items():
+        if target.is_symlink() or (target.exists() and not (target.is_file() and target.read_bytes() == data)):
+            raise InputError(f"{target}: a different file is there; the visual mesh's copy would replace it")
+        if not target.exists():
+            write.append((target, data))
+    for target, data in write:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(target) as tmp:
+            tmp.write_bytes(data)
+    for uri, (name, _) in copies.items():
         urdf = urdf.replace(f'filename="{uri}"', f'filename="{prefix}{name}"')
-    return urdf, tuple(copies.values())
+    return urdf, tuple(dict.fromkeys(name for name, _ in copies.values()))

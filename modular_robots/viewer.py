@@ -25,7 +25,7 @@ from .appearance import KIND_COLOURS, KIND_LABELS, colour_of_rgba
 from .exceptions import InputError, shorten
 from .folder import ResultsFolder, atomic_write
 from .obstacles import obstacle_label
-from .obstacles._stl import StlError, read_stl, welded
+from .obstacles._stl import MAX_VISUAL_TRIANGLES, StlError, read_stl, welded
 from .plan.candidate import CandidateStatus
 from .plan.document import drawn_task, winner_plan_files
 from .plan.records import CandidateRecord, ResultDocument
@@ -180,10 +180,10 @@ def _drawn(link, folder: Path) -> list[dict]:
 def _mesh_triangles(folder: Path, mesh) -> np.ndarray:
     """The triangles of a visual mesh of the URDF in ``folder``, scaled: only a copy beside it."""
     name = str(mesh.filename)
-    if not is_mesh_copy(name):
-        raise ValueError(f"visual mesh {shorten(name)}: expected one of the mesh_*.stl copies beside the URDF")
+    if not is_mesh_copy(name) or (folder / name).is_symlink():
+        raise ValueError(f"visual mesh {shorten(name)}: expected one of the mesh_*.stl files beside the URDF")
     try:
-        triangles = read_stl(folder / name)[0]
+        triangles = read_stl(folder / name, MAX_VISUAL_TRIANGLES)[0]
     except StlError as exc:
         raise ValueError(str(exc)) from None
     scale = np.ones(3) if mesh.scale is None else np.broadcast_to(np.asarray(mesh.scale, dtype=float), 3)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 import yourdfpy
 from click.testing import CliRunner
 from scipy.spatial import ConvexHull
@@ -23,7 +24,7 @@ from modular_robots.appearance import KIND_COLOURS
 from modular_robots.catalog import load_catalog
 from modular_robots.cli import main
 from modular_robots.composition import Composition
-from modular_robots.exceptions import CatalogError, InputWarning
+from modular_robots.exceptions import CatalogError, InputError, InputWarning
 from modular_robots.obstacles._stl import read_stl, stl_bytes
 from modular_robots.pipeline import optimize_composition
 from modular_robots.scenario import load_scenario
@@ -203,24 +204,6 @@ def test_the_improv_winners_page_draws_its_meshes_offline_in_chromium(improv_res
         assert linkish.mean() > 0.005, linkish.mean()
 
 
-def test_a_new_run_into_the_folder_removes_the_previous_winners_meshes(improv_results, tmp_path):
-    folder = tmp_path / "reused"
-    shutil.copytree(improv_results, folder)
-    result = CliRunner().invoke(
-        main,
-        [
-            "optimize",
-            "B-J1-L2-J1-L1-J1-L2-J2-L1-E2",
-            "--scenario",
-            str(ROOT / "scenarios" / "paper-5kg.yaml"),
-            "--out",
-            str(folder),
-        ],
-    )
-    assert result.exit_code == 0, result.output
-    assert list(folder.glob("mesh_*.stl")) == []  # the paper's modules have none
-
-
 def test_the_ros2_package_names_its_meshes_as_rviz_resolves_them(improv_results, tmp_path):
     out = tmp_path / "ws" / "src" / "improv_arm"
     result = CliRunner().invoke(main, ["export", str(improv_results), "--ros2", str(out)])
@@ -234,3 +217,89 @@ def test_the_ros2_package_names_its_meshes_as_rviz_resolves_them(improv_results,
         assert copy.read_bytes() == (improv_results / copy.name).read_bytes()
     assert "file://" not in text
     assert "install(DIRECTORY urdf config launch meshes DESTINATION" in (out / "CMakeLists.txt").read_text()
+
+
+# -- what an independent review found ------------------------------------------------------------
+def test_a_mesh_named_in_capitals_is_copied_under_a_name_the_folder_knows(tmp_path):
+    from modular_robots.urdf import is_mesh_copy, localise_meshes
+
+    source = tmp_path / "catalogue" / "Link.STL"
+    source.parent.mkdir()
+    source.write_bytes((CATALOGS / "meshes" / "IMPROV" / "L3_12-b52587dc58.stl").read_bytes())
+    text = f'<robot name="r"><link name="a"><visual><geometry><mesh filename="{source.as_uri()}"/></geometry></visual></link></robot>'
+    localised, [name] = localise_meshes(text, tmp_path / "out")
+    assert is_mesh_copy(name) and name.endswith(".stl") and name.startswith("mesh_Link-")
+    assert f'filename="{name}"' in localised and (tmp_path / "out" / name).read_bytes() == source.read_bytes()
+    # a different file under that name is never replaced
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / name).write_bytes(b"mine")
+    with pytest.raises(InputError, match="a different file is there"):
+        localise_meshes(text, tmp_path / "other")
+    assert (tmp_path / "other" / name).read_bytes() == b"mine"
+
+
+def _paper_winner_into(folder: Path) -> None:
+    """``optimize`` the paper-5kg winner (modules without meshes) into ``folder``."""
+    scenario = str(ROOT / "scenarios" / "paper-5kg.yaml")
+    result = CliRunner().invoke(
+        main, ["optimize", "B-J1-L2-J1-L1-J1-L2-J2-L1-E2", "--scenario", scenario, "--out", str(folder)]
+    )
+    assert result.exit_code == 0, result.output
+
+
+def test_a_new_run_removes_only_the_meshes_the_previous_urdf_named(improv_results, tmp_path):
+    folder = tmp_path / "mine"
+    shutil.copytree(improv_results, folder)
+    (folder / "mesh_my_fixture.stl").write_bytes(b"the user's")
+    _paper_winner_into(folder)
+    assert [p.name for p in folder.glob("mesh_*.stl")] == ["mesh_my_fixture.stl"]  # the winner's went
+
+
+def test_the_ros2_package_never_copies_a_link_or_a_path_and_keeps_no_stale_mesh(improv_results, tmp_path):
+    out = tmp_path / "arm"
+    assert CliRunner().invoke(main, ["export", str(improv_results), "--ros2", str(out)]).exit_code == 0
+    assert len(list((out / "meshes").iterdir())) == 3
+    # a winner without meshes over it: its meshes go, the folder too
+    plain = tmp_path / "plain"
+    _paper_winner_into(plain)
+    again = CliRunner().invoke(main, ["export", str(plain), "--ros2", str(out)])
+    assert again.exit_code == 0, again.output
+    assert not (out / "meshes").exists() and "meshes" not in (out / "CMakeLists.txt").read_text()
+    # a results folder whose mesh is a link, or whose URDF names a path: refused, nothing written
+    for damage in ("link", "path"):
+        hostile = tmp_path / f"hostile-{damage}"
+        shutil.copytree(improv_results, hostile)
+        secret = tmp_path / "secret.txt"
+        secret.write_text("SECRET")
+        urdf = (hostile / "winner.urdf").read_text()
+        if damage == "link":
+            name = mesh_name(urdf)
+            (hostile / name).unlink()
+            (hostile / name).symlink_to(secret)
+        else:
+            (hostile / "winner.urdf").write_text(
+                urdf.replace(f'filename="{mesh_name(urdf)}"', f"filename='{secret.as_uri()}'")
+            )
+        target = tmp_path / f"out-{damage}"
+        refused = CliRunner().invoke(main, ["export", str(hostile), "--ros2", str(target)])
+        assert refused.exit_code == 1 and "expected a mesh_*.stl file beside it" in refused.output, refused.output
+        assert not target.exists()
+
+
+def mesh_name(urdf: str) -> str:
+    import re
+
+    return re.search(r'filename="(mesh_[^"]+)"', urdf)[1]
+
+
+def test_a_long_plans_goal_still_fits_one_command_line_argument(improv_results, tmp_path):
+    from modular_robots.ros2 import MAX_GOAL_BYTES
+
+    out = tmp_path / "arm"
+    result = CliRunner().invoke(main, ["export", str(improv_results), "--ros2", str(out), "--goal-rate", "5000"])
+    assert result.exit_code == 0, result.output
+    assert "points per second, not 5000" in result.output
+    text = (out / "config" / "goal.yaml").read_text()
+    assert len(text.encode()) <= MAX_GOAL_BYTES
+    points = yaml.safe_load(text)["trajectory"]["points"]
+    assert len(points) > 100  # as many as fit, not a handful
