@@ -444,21 +444,22 @@ class ProcessEngine:
     once (:func:`_end_pool`).
     """
 
-    def __init__(self, jobs: int | None = None, window: int = 16):
+    def __init__(self, jobs: int | None = None, window: int = 16, keep: bool = False):
         self.jobs = resolve_jobs(jobs)
         self.window = window
+        #: Keep the workers after a stream that finished, for the next stream of the same context
+        #: (the same object): a caller of many short streams (the best-first search's batches)
+        #: then starts them once, and their caches stay warm. :meth:`close` ends them.
+        self.keep = keep
+        self._kept: tuple[Any, ProcessPoolExecutor, Mapping[int, Any]] | None = None
 
     def map_chunks(self, work, context, items, chunksize=16):
-        pool = _started(
-            self.jobs,  # its queues' pipes
-            lambda: ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(os.getpid(), context)),
-        )
-        workers = pool._processes  # the pool fills it as it starts them (see _end_pool)
+        pool, workers, fresh = self._pool(context)
         pending: deque = deque()
         finished = False
         try:
             for index, chunk in enumerate(_chunks(items, chunksize)):
-                if index == 0:  # the first starts the workers
+                if index == 0 and fresh:  # the first starts the workers
                     with _signals_held():
                         pending.append(_started(self.jobs, functools.partial(pool.submit, _run_in_worker, work, chunk)))
                 else:
@@ -469,11 +470,29 @@ class ProcessEngine:
                 yield from _result(pending.popleft())
             finished = True
         finally:
-            _end_pool(pool, workers, finished)
+            if finished and self.keep:
+                self._kept = (context, pool, workers)
+            else:
+                _end_pool(pool, workers, finished)
             del pool, workers  # its pipes closed now, not with a traceback that holds this frame
 
+    def _pool(self, context) -> tuple[ProcessPoolExecutor, Mapping[int, Any], bool]:
+        """The kept pool if it was started for ``context``, else a new one (the kept one ended)."""
+        kept, self._kept = self._kept, None
+        if kept is not None:
+            if kept[0] is context:
+                return kept[1], kept[2], False
+            _end_pool(kept[1], kept[2], True)
+        pool = _started(
+            self.jobs,  # its queues' pipes
+            lambda: ProcessPoolExecutor(self.jobs, initializer=_start_worker, initargs=(os.getpid(), context)),
+        )
+        return pool, pool._processes, True  # the pool fills _processes as it starts them (see _end_pool)
+
     def close(self) -> None:
-        pass
+        kept, self._kept = self._kept, None
+        if kept is not None:
+            _end_pool(kept[1], kept[2], True)
 
 
 def _result(future: Future) -> Any:
@@ -546,9 +565,10 @@ def _start_failure(exc: BaseException) -> str:
     return reason
 
 
-def make_engine(jobs: int | None = None, execution: ExecutionSettings | None = None) -> Engine:
+def make_engine(jobs: int | None = None, execution: ExecutionSettings | None = None, keep: bool = False) -> Engine:
     """``jobs`` = 1: :class:`SerialEngine`; ``None`` or 0: every available core
-    (:func:`resolve_jobs`). With ``execution.engine`` = ``ray``, a
+    (:func:`resolve_jobs`); ``keep``: its workers kept between streams of one context
+    (:attr:`ProcessEngine.keep`; Ray's are anyway). With ``execution.engine`` = ``ray``, a
     :class:`~modular_robots.ray_engine.RayEngine` (``jobs``: the CPUs of a Ray instance of this
     process's own; a cluster at ``execution.address`` has its own)."""
     jobs = resolve_jobs(jobs)
@@ -556,7 +576,7 @@ def make_engine(jobs: int | None = None, execution: ExecutionSettings | None = N
         from .ray_engine import RayEngine
 
         return RayEngine(execution.address, jobs, connect_timeout=execution.connect_timeout)
-    return SerialEngine() if jobs == 1 else ProcessEngine(jobs)
+    return SerialEngine() if jobs == 1 else ProcessEngine(jobs, keep=keep)
 
 
 # -- executors: advance long-lived jobs in lockstep ----------------------------------------------

@@ -146,7 +146,7 @@ def search_scenario(
         search ended; ``result.json`` then says why.
     """
     notify = on_progress or (lambda stage, figures: None)
-    engine = make_engine(jobs, scenario.execution)
+    engine = make_engine(jobs, scenario.execution, keep=True)  # step B's batches share the workers
     try:
         return _Search(scenario, out, engine, settings, feasibility, notify, max_compositions).run()
     finally:
@@ -176,6 +176,12 @@ class _Search:
         self.rounds = 0
         self.steps = 0
         self.stage_counts = {_UNCHECKED: 0, _RELAXED: 0}  # compositions through each step B
+        #: What step B's workers get once: the catalogue, the task and each stage's settings.
+        self.check_context = (
+            scenario.catalog,
+            scenario.task,
+            {_UNCHECKED: feasibility.relaxed(), _RELAXED: feasibility},
+        )
         self.first_estimate: dict | None = None
 
     # -- the loop ---------------------------------------------------------------------------------
@@ -297,9 +303,8 @@ class _Search:
                 found[item.kind, item.composition.name] = cached
         for kind, compositions in todo.items():
             if compositions:
-                settings = self.feasibility.relaxed() if kind == _UNCHECKED else self.feasibility
-                context = (self.scenario.catalog, self.scenario.task, settings)
-                for verdict in self.engine.map_chunks(_check_chunk, context, compositions, chunksize=8):
+                tagged = [(kind, composition) for composition in compositions]
+                for verdict in self.engine.map_chunks(_check_chunk, self.check_context, tagged, chunksize=8):
                     found[kind, verdict.composition.name] = verdict
                     self.log.write_verdict(kind, verdict)
                     if kind == _UNCHECKED:
@@ -445,9 +450,11 @@ class _Search:
         self.notify("search", figures)
 
 
-def _check_chunk(context, chunk: list[Composition]) -> list[Verdict]:
+def _check_chunk(context, chunk: list[tuple[int, Composition]]) -> list[Verdict]:
+    """Step B of a chunk of one stage's compositions (``(stage, composition)``): the relaxed
+    cascade for stage 1, the whole for stage 2."""
     catalog, task, settings = context
-    return check_compositions(chunk, catalog, task, settings)
+    return check_compositions([composition for _, composition in chunk], catalog, task, settings[chunk[0][0]])
 
 
 def _solve(scenario: Scenario, spec: CandidateSpec, expected: CandidateResult) -> CandidateResult:
