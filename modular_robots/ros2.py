@@ -23,7 +23,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
-from xml.sax.saxutils import escape
 
 import numpy as np
 import yaml
@@ -33,6 +32,7 @@ from .folder import ResultsFolder, atomic_write
 from .plan.trajectory import Trajectory, controller_rate, joint_trajectory
 from .report import read_winner, winner_robot
 from .urdf import is_mesh_copy, localise_meshes
+from .xml_text import xml_attribute
 
 __all__ = ["Ros2Bundle", "write_ros2_bundle", "package_name", "GOAL_TOLERANCE", "PATH_TOLERANCE"]
 
@@ -214,7 +214,7 @@ def with_ros2_control(urdf: str, joints: tuple[str, ...], start) -> str:
             '      </state_interface>\n      <state_interface name="velocity"/>\n'
             '      <state_interface name="effort"/>\n'
         )
-        blocks.append(f'    <joint name="{escape(name)}">\n{commands}{states}    </joint>\n')
+        blocks.append(f'    <joint name="{xml_attribute(name)}">\n{commands}{states}    </joint>\n')
     control = (
         '  <ros2_control name="modular_robot" type="system">\n    <hardware>\n'
         "      <plugin>mock_components/GenericSystem</plugin>\n    </hardware>\n"

@@ -114,7 +114,11 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
         "tf": tf,
         "times": _round(times),
         "links": [
-            {"name": link.name, "color": _colour(link), "shapes": _drawn(link, folder) if painted else _shapes(link)}
+            {
+                "name": link.name,
+                "color": _colour(link),
+                "shapes": _shapes(link.visuals, folder) if painted else _shapes(link.collisions, folder, "capsule"),
+            }
             for link in links
         ],
         "frames": frames,
@@ -132,38 +136,16 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
     }
 
 
-def _shapes(link) -> list[dict]:
-    out = []
-    for collision in link.collisions:
-        # yourdfpy leaves the origin None when the URDF gives none (the identity)
-        geometry = collision.geometry
-        origin = _columns(np.eye(4) if collision.origin is None else collision.origin)
-        if geometry.cylinder is not None:
-            out.append(
-                {
-                    "type": "capsule",
-                    "radius": geometry.cylinder.radius,
-                    "length": geometry.cylinder.length,
-                    "origin": origin,
-                }
-            )
-        elif geometry.sphere is not None:
-            out.append({"type": "sphere", "radius": geometry.sphere.radius, "origin": origin})
-        elif geometry.box is not None:
-            out.append({"type": "box", "size": [float(v) for v in geometry.box.size], "origin": origin})
-    return out
-
-
-def _drawn(link, folder: Path) -> list[dict]:
-    """The link's ``<visual>`` elements in the page's vocabulary: primitives as they are, a mesh
-    (one of the copies beside the URDF, :func:`~modular_robots.urdf.localise_meshes`) as its
-    welded triangles, scaled."""
+def _shapes(elements, folder: Path, cylinder: str = "cylinder") -> list[dict]:
+    """A link's ``<visual>`` or ``<collision>`` elements in the page's vocabulary: primitives as
+    they are (a collision cylinder, which stands for a capsule, as ``cylinder="capsule"``), a mesh
+    (one of the copies beside the URDF, :func:`~modular_robots.urdf.localise_meshes`) as its welded
+    triangles, scaled."""
     out: list[dict] = []
-    for visual in link.visuals:
-        geometry = visual.geometry
-        origin = _columns(np.eye(4) if visual.origin is None else visual.origin)
+    for element in elements:
+        geometry = element.geometry
         if geometry.cylinder is not None:
-            out.append({"type": "cylinder", "radius": geometry.cylinder.radius, "length": geometry.cylinder.length})
+            out.append({"type": cylinder, "radius": geometry.cylinder.radius, "length": geometry.cylinder.length})
         elif geometry.sphere is not None:
             out.append({"type": "sphere", "radius": geometry.sphere.radius})
         elif geometry.box is not None:
@@ -173,7 +155,8 @@ def _drawn(link, folder: Path) -> list[dict]:
             out.append({"type": "mesh", "vertices": _round(vertices), "faces": faces.tolist()})
         else:
             continue
-        out[-1]["origin"] = origin
+        # yourdfpy leaves the origin None when the URDF gives none (the identity)
+        out[-1]["origin"] = _columns(np.eye(4) if element.origin is None else element.origin)
     return out
 
 
