@@ -11,8 +11,10 @@ optima.
 ``tool speed`` (the time cost): the tool must cover the distance between the tolerated start and
 goal positions, and it cannot move faster than the sum, over the joints, of each joint's velocity
 limit times an upper bound on the tool's distance from its axis (its *lever*, from the catalogue's
-lengths by the triangle inequality; a prismatic joint moves the tool at its own speed). The other
-costs have no bound here (0): the search then orders by nothing and certifies nothing by bound.
+lengths by the triangle inequality; a prismatic joint moves the tool at its own speed). A cost
+of the design (mass, joints, modules, price) is its own bound; a weighted sum's bound is the
+weighted sum of its terms' (:func:`objective_bound`). The motion's other costs (effort) have no
+bound here (0): a task minimising them alone is ordered by nothing and certified by nothing.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 
 from .catalog import Catalog
 from .composition import Composition
+from .costs import COSTS, Design, DesignCost, Objective, design_of
 from .feasibility import _piece_reach, _reach_along
 from .modules import Joint
 from .plan.verification import LIMIT_TOLERANCE, TERMINAL_TOLERANCE
@@ -37,9 +40,11 @@ __all__ = [
     "joint_levers",
     "tool_speed_limit",
     "catalog_bound",
+    "objective_bound",
     "TOOL_SPEED",
     "IK_TRAVEL",
     "JOINT_TRAVEL",
+    "DESIGN",
 ]
 
 #: The bounds' names, as the certificate gives them: before step B (:func:`catalog_bound`), after
@@ -47,6 +52,8 @@ __all__ = [
 TOOL_SPEED = "tool speed"
 IK_TRAVEL = "joint travel of the IK solutions"
 JOINT_TRAVEL = "joint travel"
+#: The bound of an objective of the design's costs alone: their values.
+DESIGN = "design"
 
 
 @dataclass(frozen=True)
@@ -197,13 +204,35 @@ def _general_speed(catalog: Catalog, modules: tuple[str, ...]) -> tuple[np.ndarr
 def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolerance: float) -> CatalogBound:
     """The lower bound on ``composition``'s optimal cost for ``task`` before step B.
 
-    For the time cost (:data:`TOOL_SPEED`) [s]: the distance between the start and the goal less
+    For the time (:data:`TOOL_SPEED`) [s]: the distance between the start and the goal less
     both position tolerances (``task``'s, else step B's IK ``tolerance`` [m]) and verification's
     terminal tolerance, over :func:`tool_speed_limit` raised by verification's limit tolerance.
-    For any other cost, 0 (``none``)."""
-    if task.cost != "time":
+    For the task's objective, :func:`objective_bound` of that time (``none`` when it is 0)."""
+    objective = task.cost
+    time = 0.0
+    if "time" in dict(objective.terms):
+        gap = (
+            math.dist(task.start, task.goal) - (task.start_tolerance or tolerance) - (task.goal_tolerance or tolerance)
+        )
+        speed = tool_speed_limit(composition, catalog) * (1.0 + LIMIT_TOLERANCE)
+        gap -= TERMINAL_TOLERANCE
+        time = max(gap, 0.0) / speed if 0.0 < speed < math.inf else 0.0
+    by_design = any(isinstance(COSTS[name], DesignCost) for name, _ in objective.terms)
+    value = objective_bound(objective, time, design_of(composition.modules, catalog) if by_design else None)
+    if value <= 0.0:
         return CatalogBound("none", 0.0)
-    gap = math.dist(task.start, task.goal) - (task.start_tolerance or tolerance) - (task.goal_tolerance or tolerance)
-    speed = tool_speed_limit(composition, catalog) * (1.0 + LIMIT_TOLERANCE)
-    gap -= TERMINAL_TOLERANCE
-    return CatalogBound(TOOL_SPEED, max(gap, 0.0) / speed if 0.0 < speed < math.inf else 0.0)
+    return CatalogBound(TOOL_SPEED if time > 0.0 else DESIGN, value)
+
+
+def objective_bound(objective: Objective, time: float, design: Design | None) -> float:
+    """A lower bound on the sum ``objective`` minimises, given a lower bound ``time`` [s] on the
+    motion's duration and the robot's ``design`` (needed when the sum has a cost of the design):
+    each term's weight times ``time`` for the time, times its value for a cost of the design, 0
+    for another cost of the motion (none is known)."""
+    total = 0.0
+    for name, weight in objective.terms:
+        if name == "time":
+            total += weight * time
+        elif isinstance(COSTS[name], DesignCost):
+            total += weight * COSTS[name].value(design)  # type: ignore[attr-defined]
+    return total

@@ -30,6 +30,7 @@ from .modules import (
     check_grammar_ids,
     read_assembly_grammar,
     read_general_module,
+    read_price,
 )
 
 __all__ = ["JointLimits", "Module", "Grammar", "Catalog", "load_catalog"]
@@ -71,6 +72,8 @@ class Module:
     limits: JointLimits | None = None
     armature: float = 0.0
     collision: str = "sphere"
+    #: The module's price in the catalogue's currency (None: not given), for the ``price`` cost.
+    price: float | None = None
 
     @property
     def dof(self) -> int:
@@ -283,6 +286,7 @@ def _read_module(f: Fields) -> Module:
     collision = f.string("collision", default="capsule" if kind == "link" else "sphere", choices=COLLISION_SHAPES)
     twist_in = math.radians(f.number("twist_in_deg", default=0.0, minimum=-360.0, maximum=360.0, why=_TURN))
     twist_out = math.radians(f.number("twist_out_deg", default=0.0, minimum=-360.0, maximum=360.0, why=_TURN))
+    price = read_price(f)
     f.done()
     return Module(
         id=module_id,
@@ -298,6 +302,7 @@ def _read_module(f: Fields) -> Module:
         limits=limits,
         armature=armature,
         collision=collision,
+        price=price,
     )
 
 

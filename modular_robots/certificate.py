@@ -114,8 +114,11 @@ class Ledger:
     candidates end differently takes the first of: solved, unexplored, ratio-pruned, excluded by
     a bound)."""
 
-    def __init__(self, space: int):
+    def __init__(self, space: int, band: float = 1.0):
         self.space = space
+        #: A composition can win only when its bound is below the best cost times this (1 + the
+        #: tie band of a lexicographic objective, :attr:`~modular_robots.costs.Objective.band`).
+        self.band = band
         self.classes: dict[str, str] = {}
         self.verified: set[str] = set()
         self.open: list[float] = []  # bounds of what may still be better: failed, ratio-pruned, unexplored
@@ -160,7 +163,7 @@ class Ledger:
 
     def left(self, composition: str, bound: float, name: str, best: float) -> None:
         """A composition (or one of its candidates) still in the frontier when the search ended."""
-        if bound >= best * (1.0 - _EQUAL):
+        if bound >= best * self.band * (1.0 - _EQUAL):
             self._set(composition, f"bound:{name}")
         else:
             self._set(composition, _UNEXPLORED)
@@ -168,7 +171,7 @@ class Ledger:
 
     def beyond(self, count: int, smallest: float, name: str, best: float) -> None:
         """``count`` compositions never taken into the frontier, their smallest bound ``smallest``."""
-        if smallest >= best * (1.0 - _EQUAL):
+        if smallest >= best * self.band * (1.0 - _EQUAL):
             self.extra[f"bound:{name}"] += count
         else:
             self.extra["unexplored"] += count
@@ -180,14 +183,16 @@ class Ledger:
         self.uncertain.append(bound)
         self.unexplored.append(bound)
 
-    def certificate(self, winner: str | None, cost: float, ended: str) -> Certificate:
+    def certificate(self, winner: str | None, cost: float, ended: str, best: float | None = None) -> Certificate:
+        """The certificate of ``winner`` at ``cost``; ``best`` is the smallest verified cost (the
+        winner's unless a lexicographic objective chose a robot within the tie band)."""
         counts = Counter(self.classes.values()) + self.extra
-        best = cost if winner is not None else None
+        reference = cost if best is None else best
         open_bound = min(self.open) if self.open else None
-        certified = winner is not None and all(b >= cost * (1.0 - _EQUAL) for b in self.uncertain)
+        certified = winner is not None and all(b >= reference * self.band * (1.0 - _EQUAL) for b in self.uncertain)
         gap = None
-        if winner is not None and open_bound is not None and open_bound < cost:
-            gap = cost / open_bound if open_bound > 0 else math.inf
+        if winner is not None and open_bound is not None and open_bound < reference:
+            gap = reference / open_bound if open_bound > 0 else math.inf
         return Certificate(
             space=self.space,
             solved=counts[_SOLVED],
@@ -198,7 +203,7 @@ class Ledger:
             unexplored=counts["unexplored"],
             unexplored_bound=min(self.unexplored) if self.unexplored else None,
             winner=winner,
-            winner_cost=best,
+            winner_cost=cost if winner is not None else None,
             open_bound=open_bound,
             certified=certified,
             gap=gap,

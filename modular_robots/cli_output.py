@@ -9,6 +9,8 @@ from pathlib import Path
 
 import click
 
+from .composition import Composition
+from .costs import COSTS, design_of
 from .feasibility import TEST_NAMES, FeasibilitySummary, Verdict
 from .plan.boundary import BoundaryPair
 from .plan.document import RESULT, read_document
@@ -53,6 +55,7 @@ def run_table(result, scenario, search: dict | None = None) -> str:
         ),
         ("tf [s]", f"{w.tf:.4f}"),
         (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
+        *_tie_break_row(result, scenario),
         (
             "verification",
             f"terminal error {v.terminal_error * 1000:.3f} mm, {clearance_text(v.min_clearance)}, "
@@ -82,6 +85,28 @@ def run_table(result, scenario, search: dict | None = None) -> str:
     ]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {value}" for k, value in rows)
+
+
+def _tie_break_row(result, scenario) -> list[tuple[str, str]]:
+    """With a lexicographic objective: the verified robots within the tie band, and what chose."""
+    objective = scenario.task.cost
+    if not objective.then:
+        return []
+    verified = [c for c in result.candidates if c.status == "optimal"]
+    best = min(c.cost for c in verified)
+    tied = [c for c in verified if c.cost <= best * objective.band]
+
+    def design(c):
+        return design_of(Composition.from_name(c.composition or c.name, scenario.catalog).modules, scenario.catalog)
+
+    values = ", ".join(f"{name} {COSTS[name].value(design(result.winner)):.4g}" for name in objective.then)  # type: ignore[attr-defined]
+    return [
+        (
+            "tie-break",
+            f"{values}; {len(tied)} verified within {objective.within:.3g} of the best cost {best:.4g} "
+            f"(of {len(verified)} verified)",
+        )
+    ]
 
 
 def _unconverged_row(result, scenario) -> list[tuple[str, str]]:

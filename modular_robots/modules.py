@@ -44,6 +44,15 @@ IDENTITY_XYZ = (0.0, 0.0, 0.0)
 #: IK's systems singular).
 MAX_SIZE = 10.0  # lengths, diameters, radii [m]
 MAX_MASS = 1e5  # [kg]
+#: The highest price of a module, in any currency: higher is a typo (or a catalogue of ships).
+MAX_PRICE = 1e9
+
+
+def read_price(f: Fields) -> float | None:
+    """A module's optional ``price`` (a non-negative number in the catalogue's currency)."""
+    return f.number("price", default=None, minimum=0.0, maximum=MAX_PRICE)
+
+
 MAX_ARMATURE = 1e3  # [kg m^2 | kg]
 MAX_POSITION = 100.0  # joint limits [rad | m]
 MIN_VELOCITY, MAX_VELOCITY = 1e-3, 1e3  # [rad/s | m/s]
@@ -169,6 +178,8 @@ class GeneralModule:
     inlet: Connector
     outlet: Connector
     notes: str = field(default="", compare=False)
+    #: The module's price in the catalogue's currency (None: not given), for the ``price`` cost.
+    price: float | None = None
 
     @property
     def dof(self) -> int:
@@ -393,6 +404,7 @@ def read_general_module(f: Fields) -> GeneralModule:
     """
     module_id = _identifier(f, "id")
     notes = f.string("notes", default="")
+    price = read_price(f)
     bodies = tuple(_body(b) for b in f.mappings("bodies"))
     f.check("bodies", bool(bodies), "expected at least one body")
     names = [b.id for b in bodies]
@@ -406,7 +418,7 @@ def read_general_module(f: Fields) -> GeneralModule:
         f.check(key, connector.gender == gender, f"expected gender {gender!r} (inputs are female, outputs male)")
     for joint in joints:
         f.check("joints", {joint.parent, joint.child} <= set(names), f"joint {joint.id}: unknown parent or child body")
-    module = GeneralModule(module_id, bodies, joints, inlet, outlet, notes)
+    module = GeneralModule(module_id, bodies, joints, inlet, outlet, notes, price)
     chain = module.chain()
     f.check(
         "joints",
@@ -537,7 +549,13 @@ def from_convention_a(module) -> GeneralModule:
         )
         inlet = Connector("in", "mount", Pose(IDENTITY_XYZ, (math.pi, 0.0, 0.0)), "f", inlet_type)
         return GeneralModule(
-            module.id, (first, massive), (joint,), inlet, Connector("out", "body", outlet_pose, "m", outlet_type)
+            module.id,
+            (first, massive),
+            (joint,),
+            inlet,
+            Connector("out", "body", outlet_pose, "m", outlet_type),
+            price=module.price,
         )
     inlet = Connector("in", "body", inlet_pose, "f", inlet_type)
-    return GeneralModule(module.id, (massive,), (), inlet, Connector("out", "body", outlet_pose, "m", outlet_type))
+    outlet = Connector("out", "body", outlet_pose, "m", outlet_type)
+    return GeneralModule(module.id, (massive,), (), inlet, outlet, price=module.price)

@@ -23,7 +23,7 @@ import numpy as np
 from .certificate import Certificate, Ledger
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
-from .costs import COSTS
+from .costs import Design, design_of
 from .exceptions import CompositionError, InfeasibleError, Terminated, shorten
 from .execution import make_engine, make_executor, single_threaded_blas
 from .feasibility import (
@@ -53,6 +53,8 @@ __all__ = [
     "cost_bound",
     "exhaustive_certificate",
     "optimize_composition",
+    "ranked",
+    "result_design",
     "run_scenario",
     "track_winner",
     "winner_approach",
@@ -113,20 +115,34 @@ def cost_bound(scenario: Scenario, spec: CandidateSpec) -> float:
     """The lower bound on ``spec``'s optimal cost before it is optimised, the one its problem will
     have (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`): the task's cost's
     :meth:`~modular_robots.costs.Cost.lower_bound` at the plan's velocity bounds."""
-    cost = COSTS[scenario.task.cost]
+    cost = scenario.task.cost.cost
     if not cost.bounded:
         return 0.0
     robot = robot_model(spec.composition, scenario.catalog, scenario.task.payload)
     velocity_bound = scenario.optimizer.velocity_margin * robot.velocity_limit
     if scenario.optimizer.free_ends:
-        return free_ends_bound(cost.name, robot, task_ends(scenario.task), velocity_bound)
+        return free_ends_bound(cost, robot, task_ends(scenario.task), velocity_bound)
     q_start, q_goal = np.asarray(spec.q_start, dtype=float), np.asarray(spec.q_goal, dtype=float)
     return cost.lower_bound(robot, q_start, q_goal, velocity_bound)
 
 
-def _winner(results: Iterable[CandidateResult]) -> CandidateResult | None:
+def ranked(results: Iterable[CandidateResult], scenario: Scenario) -> list[CandidateResult]:
+    """The verified results, best first by the task's objective
+    (:meth:`~modular_robots.costs.Objective.rank`: the cost, and within a lexicographic order's
+    tie band the costs of the design)."""
     optimal = [r for r in results if r.status == CandidateStatus.OPTIMAL]
-    return min(optimal, key=lambda r: (r.cost, r.name)) if optimal else None
+    return scenario.task.cost.rank(optimal, lambda r: r.cost, lambda r: result_design(r, scenario), lambda r: r.name)
+
+
+def result_design(result: CandidateResult, scenario: Scenario) -> Design:
+    """The :class:`~modular_robots.costs.Design` of ``result``'s composition."""
+    modules = Composition.from_name(result.composition or result.name, scenario.catalog).modules
+    return design_of(modules, scenario.catalog)
+
+
+def _winner(results: Iterable[CandidateResult], scenario: Scenario) -> CandidateResult | None:
+    best = ranked(results, scenario)
+    return best[0] if best else None
 
 
 def run_scenario(
@@ -214,7 +230,7 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
             make_candidate, scenario, specs, [s.name for s in specs], engine.jobs, scenario.execution
         )
         try:  # from here on, any ending stops the workers and records every candidate
-            manager = PruningManager(executor, scenario.pruning, bounds=bounds)
+            manager = PruningManager(executor, scenario.pruning, bounds=bounds, band=scenario.task.cost.band)
             recorder.update(counts=stage_counts(len(survivors), len(specs)))
             for progress in manager.rounds():
                 rounds = progress.round
@@ -223,12 +239,12 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
         finally:
             executor.shutdown()
             results = record()
-        winner = _winner(results)
+        winner = _winner(results, scenario)
         if winner is None:
             reasons = "; ".join(f"{r.name}: {r.reason}" for r in results[:3])
             recorder.finish("failed", f"every candidate failed ({reasons})")
             raise InfeasibleError(f"no candidate converged to a verified trajectory ({reasons})")
-        certificate = exhaustive_certificate(summary, results, bounds, winner)
+        certificate = exhaustive_certificate(summary, results, bounds, winner, scenario.task.cost.band)
         recorder.update(search={"kind": "all", "certificate": certificate.to_json()})
         recorder.record_winner(
             winner,
@@ -245,15 +261,19 @@ def exhaustive_certificate(
     results: Iterable[CandidateResult],
     bounds: dict[str, float],
     winner: CandidateResult,
+    band: float = 1.0,
 ) -> Certificate:
     """The certificate of a run that put every composition through step B: each removed by its
-    test, each of the others by its candidates' ends (:class:`~modular_robots.certificate.Ledger`)."""
-    ledger = Ledger(summary.checked)
+    test, each of the others by its candidates' ends (:class:`~modular_robots.certificate.Ledger`;
+    ``band``: :attr:`~modular_robots.costs.Objective.band`)."""
+    results = list(results)
+    ledger = Ledger(summary.checked, band)
     for test, count in summary.removed.items():
         ledger.removed_many(test, count)
     for result in results:
         ledger.candidate(result, bounds.get(result.name, 0.0))
-    return ledger.certificate(winner.composition, winner.cost, "exhausted")
+    best = min(r.cost for r in results if r.status == CandidateStatus.OPTIMAL)
+    return ledger.certificate(winner.composition, winner.cost, "exhausted", best)
 
 
 def optimize_composition(
@@ -318,7 +338,7 @@ def optimize_composition(
         except KeyboardInterrupt as exc:
             for candidate in candidates:
                 candidate.close()
-            done = _winner(record())
+            done = _winner(record(), scenario)
             if done is not None:
                 recorder.record_winner(done)
             recorder.finish(
@@ -332,7 +352,7 @@ def optimize_composition(
                 if candidate.result is None:
                     candidate.close()
         results = record()
-        winner = _winner(results)
+        winner = _winner(results, scenario)
         if winner is None:
             reason = "; ".join(f"{r.name}: {r.reason}" for r in results)
             recorder.finish("failed", reason)

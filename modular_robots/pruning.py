@@ -202,16 +202,19 @@ def paper_rule(view: RoundCosts, settings: PruningSettings = PruningSettings()) 
     }
 
 
-def bound_rule(bounds: Mapping[str, float], converged: Mapping[str, float]) -> dict[str, str]:
+def bound_rule(bounds: Mapping[str, float], converged: Mapping[str, float], band: float = 1.0) -> dict[str, str]:
     """Safe pruning: a candidate whose lower bound on its optimal cost exceeds the best verified
-    cost can never win, whatever its iterates; no threshold and no heuristic."""
+    cost (times ``band``, a lexicographic objective's tie band,
+    :attr:`~modular_robots.costs.Objective.band`) can never win, whatever its iterates; no
+    threshold and no heuristic."""
     if not converged:
         return {}
     best = min(converged.values())
+    within = "" if band == 1.0 else f" and its tie band of {band - 1.0:.3g}"
     return {
-        k: f"bound: no motion of it is faster than {b:.4g}, above the best verified cost {best:.4g}"
+        k: f"bound: no plan of it costs less than {b:.4g}, above the best verified cost {best:.4g}{within}"
         for k, b in bounds.items()
-        if b > best * (1.0 + 1e-12)
+        if b > best * band * (1.0 + 1e-12)
     }
 
 
@@ -255,6 +258,9 @@ class PruningManager:
     #: The best verified cost of candidates outside this manager (an earlier batch of a search),
     #: None if none: a reference from the first round, as if one of these had converged to it.
     incumbent: float | None = None
+    #: A lexicographic objective's tie band (:attr:`~modular_robots.costs.Objective.band`): the
+    #: bound rule drops a candidate only when its bound exceeds the best verified cost times this.
+    band: float = 1.0
 
     def rounds(self) -> Iterator[Progress]:
         order = self.executor.names()
@@ -326,7 +332,7 @@ class PruningManager:
         dropped = []
         while waiting and len(alive) < admit:
             name = waiting.popleft()
-            reason = bound_rule({name: self.bounds.get(name, 0.0)}, converged).get(name)
+            reason = bound_rule({name: self.bounds.get(name, 0.0)}, converged, self.band).get(name)
             if reason is None:
                 alive.append(name)
             else:
@@ -380,7 +386,7 @@ class PruningManager:
                 if len(self.trusted[n]) == s.window + 1 and self.trusted[n][0] is not None
             }
         view = RoundCosts(round_, costs, violations, converged, earlier, self.untrusted_for, floors)
-        return {**ratio_rule(view, s, self.guard_violation), **bound_rule(bounds, converged)}
+        return {**ratio_rule(view, s, self.guard_violation), **bound_rule(bounds, converged, self.band)}
 
     def _remember(self, name: str, iterate: Iterate) -> None:
         previous = self.last.get(name)

@@ -17,6 +17,7 @@ import pinocchio as pin
 
 from .catalog import Catalog
 from .composition import Composition
+from .costs import Design, design_of
 from .urdf import PAYLOAD_RADIUS, composition_urdf, link_name
 from .urdf_assembly import assembly_shapes
 
@@ -67,8 +68,11 @@ class RobotModel:
         primitives: Sequence[Primitive] = (),
         name: str = "",
         urdf: str | Callable[[], str] | None = None,
+        design: Design | None = None,
     ):
         self.model = model
+        #: What the robot is made of, for the costs of its design (None: unknown, e.g. a URDF).
+        self.design = design
         self.data = model.createData()
         self.name = name or model.name
         self._urdf = urdf
@@ -339,7 +343,8 @@ def robot_model(composition: Composition, catalog: Catalog, payload: float = 0.0
     """
     model = _pinocchio_model(composition, catalog, payload)
     urdf = partial(composition_urdf, composition, catalog, payload)
-    return RobotModel(model, "tool0", composition_primitives(composition, catalog), composition.name, urdf)
+    primitives = composition_primitives(composition, catalog)
+    return RobotModel(model, "tool0", primitives, composition.name, urdf, design_of(composition.modules, catalog))
 
 
 @lru_cache(maxsize=256)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ._yamlio import Fields, load_yaml
 from .catalog import Catalog, catalog_from_fields, load_catalog
-from .costs import COSTS
+from .costs import COSTS, DEFAULT_WITHIN, Objective, parse_objective
 from .exceptions import InputError, ScenarioError, shorten
 from .execution import CONNECT_TIMEOUT, ENGINES, ExecutionSettings, address_problem
 from .obstacles import FloorObstacle, Obstacle, SphereObstacle, obstacle_from_fields
@@ -52,7 +52,9 @@ MAX_FLOOR = 10.0
 class Task:
     """Carry ``payload`` [kg] from tool position ``start`` to ``goal`` [m, base frame], at rest at
     both ends, clear of ``obstacles`` and above the ``floor`` (``z`` [m] in the base frame; None:
-    no floor), minimising ``cost`` (``time`` or ``effort``).
+    no floor), minimising ``cost`` (an :class:`~modular_robots.costs.Objective`, or its descriptor:
+    ``time``, ``effort``, a weighted sum such as ``time + 0.05*mass``, or a lexicographic order
+    such as ``time then modules within 0.01``).
 
     At each end the tool may also be asked an orientation (``start_orientation``,
     ``goal_orientation``; None: free) and a position tolerance [m] (``start_tolerance``,
@@ -62,7 +64,7 @@ class Task:
     start: tuple[float, float, float]
     goal: tuple[float, float, float]
     obstacles: tuple[Obstacle, ...] = ()
-    cost: str = "time"
+    cost: Objective = field(default_factory=Objective)
     #: Keep the robot's modules that are not neighbours in the chain apart
     #: (:mod:`~modular_robots.self_collision`): in step B, step C and verification.
     self_collision: bool = True
@@ -71,6 +73,12 @@ class Task:
     goal_orientation: Orientation | None = None
     start_tolerance: float | None = None
     goal_tolerance: float | None = None
+    #: The longest the move may take [s] (None: no limit). A task that minimises energy alone
+    #: needs one: a slower move always needs less (the drives hold the payload without work).
+    max_time: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "cost", parse_objective(self.cost))  # a descriptor string is welcome
 
     @property
     def collision_obstacles(self) -> tuple[Obstacle, ...]:
@@ -187,6 +195,14 @@ def _scenario_from_fields(top: Fields) -> Scenario:
         raise top.fail("catalog", "the scenario names itself as its catalogue; expected a catalogue file")
     catalog = load_catalog(catalog_path)
     task = _read_task(top.mapping("task"))
+    if "price" in task.cost.names:
+        unpriced = [m.id for m in catalog.modules if m.price is None]
+        if unpriced:
+            raise top.mapping("task").fail(
+                "cost",
+                f"the price cost needs every module's price; catalogue {catalog_path.name} has none for "
+                f"{', '.join(unpriced[:10])}{', ...' if len(unpriced) > 10 else ''} (add price: to each module)",
+            )
     optimizer = _read_optimizer(top.mapping("optimizer", default=None))
     pruning = _read_pruning(top.mapping("pruning", default=None))
     execution = _read_execution(top.mapping("execution", default=None))
@@ -222,7 +238,15 @@ def _read_task(f: Fields) -> Task:
                 raise item.fail(obstacle.kind, f"the obstacle contains the {label} position {list(point)}")
         obstacles.append(obstacle)
     floor = _read_floor(f, start, goal)
-    cost = f.string("cost", default="time", choices=tuple(COSTS))
+    cost = _read_cost(f)
+    max_time = f.number("max_time", default=None, exclusive_minimum=0.0, maximum=MAX_TIME)
+    if max_time is None and _crawls(cost):
+        raise f.fail(
+            "cost",
+            f"{cost} has no minimum over the move's duration: a slower move always costs less (the drives hold "
+            "the payload without doing work), and step C would crawl toward an ever longer move; add "
+            "task.max_time [s], or add the time to the sum (e.g. time + 0.01*energy)",
+        )
     self_collision = f.boolean("self_collision", default=True)
     f.done()
     return Task(
@@ -237,7 +261,56 @@ def _read_task(f: Fields) -> Task:
         goal_orientation,
         start_tolerance,
         goal_tolerance,
+        max_time,
     )
+
+
+#: The longest move a task may allow [s].
+MAX_TIME = 3600.0
+
+
+def _crawls(objective: Objective) -> bool:
+    """Whether ``objective`` falls as the move lengthens, without end: the energy does (holding
+    the payload does no work), unless the sum counts the time or the effort too (holding the
+    payload costs effort, so an ever slower move costs ever more)."""
+    names = [name for name, _ in objective.terms]
+    return "energy" in names and not any(name in ("time", "effort") for name in names)
+
+
+def _read_cost(f: Fields) -> Objective:
+    """``task.cost``: a descriptor (:func:`~modular_robots.costs.parse_objective`), or a mapping of
+    ``minimise`` (a cost's name, or costs and their weights), ``then`` (costs of the design that
+    break ties, in order) and ``within`` (the tie band, a fraction of the best first cost)."""
+    value = f.raw("cost", "time")
+    if not isinstance(value, dict):
+        f.check("cost", isinstance(value, str), "expected a cost's name, a descriptor or a mapping")
+        try:
+            return parse_objective(value)
+        except ValueError as e:
+            raise f.fail("cost", str(e)) from None
+    c = f.mapping("cost")
+    first = c.raw("minimise")
+    if isinstance(first, dict):
+        weights = c.mapping("minimise")
+        for name in first:
+            weights.check(str(name), name in COSTS, f"unknown cost; expected one of {', '.join(COSTS)}")
+        terms = tuple((name, weights.number(name, exclusive_minimum=0.0)) for name in first)
+        weights.done()
+    else:
+        name = c.string("minimise", choices=tuple(COSTS))
+        terms = ((name, 1.0),)
+    then = c.raw("then", [])
+    c.check("then", isinstance(then, list) and all(isinstance(n, str) for n in then), "expected a list of cost names")
+    for name in then:
+        c.check("then", name in COSTS, f"unknown cost {shorten(name)}; expected one of {', '.join(COSTS)}")
+    within = c.number("within", default=DEFAULT_WITHIN if then else 0.0, minimum=0.0, maximum=1.0)
+    c.done()
+    try:
+        return Objective(terms, tuple(then), within)
+    except ValueError as e:
+        raise c.fail(
+            "then" if "after the first" in str(e) else "within" if "within" in str(e) else None, str(e)
+        ) from None
 
 
 #: The loosest position tolerance of an end [m]: looser, the tool may end anywhere on a table.

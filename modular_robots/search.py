@@ -46,9 +46,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO
 
-from .bounds import IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, catalog_bound, joint_levers
+from .bounds import IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, catalog_bound, joint_levers, objective_bound
 from .certificate import Certificate, Ledger
 from .composition import Composition, enumerate_compositions
+from .costs import design_of
 from .exceptions import InfeasibleError, InputError, shorten
 from .execution import Engine, make_engine, make_executor
 from .feasibility import (
@@ -59,7 +60,7 @@ from .feasibility import (
     composition_space,
 )
 from .ocp.candidate import CandidateSpec, make_candidate
-from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, track_winner, winner_approach
+from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, track_winner, winner_approach
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
 from .plan.document import status_counts
@@ -160,7 +161,9 @@ class _Search:
         self.space = composition_space(scenario.catalog, max_compositions or 2**62, engine.jobs)
         self.batch = settings.batch
         self.tolerance = feasibility.tolerance
-        self.ledger = Ledger(self.space)
+        #: A composition has a chance only when its bound is below the best cost times this.
+        self.band = scenario.task.cost.band
+        self.ledger = Ledger(self.space, self.band)
         self.summary = FeasibilitySummary()
         self.results: dict[str, CandidateResult] = {}
         self.specs: dict[str, CandidateSpec] = {}
@@ -209,12 +212,12 @@ class _Search:
                 if lowest is None:
                     ended = "exhausted"
                     break
-                if lowest >= self._best_cost():
+                if lowest >= self._limit():
                     break
                 if time.perf_counter() >= deadline:
                     ended = "budget"
                     break
-                if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._best_cost():
+                if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._limit():
                     self._take_pass(self.last_key, deadline)
                     continue
                 self._step()
@@ -224,7 +227,13 @@ class _Search:
             return self._finish(recorder, certificate, start)
 
     def _best_cost(self) -> float:
+        """The smallest verified cost so far (inf: none)."""
         return self.best.cost if self.best is not None else math.inf
+
+    def _limit(self) -> float:
+        """The bound below which a composition may still win: the best cost, times a
+        lexicographic objective's tie band (:attr:`~modular_robots.costs.Objective.band`)."""
+        return self._best_cost() * self.band
 
     def _lowest(self) -> float | None:
         """The smallest bound left (None: nothing is left)."""
@@ -235,13 +244,13 @@ class _Search:
 
     def _take(self, kind: int, count: int) -> list[_Item]:
         queue, taken = self.queues[kind], list[_Item]()
-        while queue and len(taken) < count and queue[0].bound < self._best_cost():
+        while queue and len(taken) < count and queue[0].bound < self._limit():
             taken.append(heapq.heappop(queue))
         return taken
 
     def _step(self) -> None:
         self.steps += 1
-        best = self._best_cost()
+        best = self._limit()
         unchecked = self.queues[_UNCHECKED]
         waiting = (unchecked and unchecked[0].bound < best) or (self.beyond[0] and self.beyond[1] < best)
         later = not waiting or self.steps % self.settings.interleave == 0
@@ -334,11 +343,13 @@ class _Search:
         of its fastest pair (:attr:`Verdict.time_bound`), less what the clusters' members may
         differ by, within the limits verification allows (none for another cost than time, or
         with free ends: step C then chooses its own ends)."""
-        if self.scenario.task.cost != "time" or self.scenario.optimizer.free_ends or verdict.time_bound is None:
-            return 0.0
-        limits = [lever.velocity for lever in joint_levers(verdict.composition, self.scenario.catalog)]
-        slowest = min((v for v in limits if 0.0 < v < math.inf), default=math.inf)
-        return max(verdict.time_bound - 2 * _CLUSTER / slowest, 0.0) / (1.0 + LIMIT_TOLERANCE)
+        objective, catalog = self.scenario.task.cost, self.scenario.catalog
+        time = 0.0
+        if "time" in dict(objective.terms) and not self.scenario.optimizer.free_ends and verdict.time_bound is not None:
+            limits = [lever.velocity for lever in joint_levers(verdict.composition, catalog)]
+            slowest = min((v for v in limits if 0.0 < v < math.inf), default=math.inf)
+            time = max(verdict.time_bound - 2 * _CLUSTER / slowest, 0.0) / (1.0 + LIMIT_TOLERANCE)
+        return objective_bound(objective, time, design_of(verdict.composition.modules, catalog))
 
     # -- stage 3: step C ------------------------------------------------------------------------------
     def _optimise(self, items: list[_Item]) -> None:
@@ -351,7 +362,9 @@ class _Search:
                 make_candidate, self.scenario, specs, names, self.engine.jobs, self.scenario.execution
             )
             incumbent = self.best.cost if self.best is not None else None
-            manager = PruningManager(executor, self.scenario.pruning, bounds=bounds, incumbent=incumbent)
+            manager = PruningManager(
+                executor, self.scenario.pruning, bounds=bounds, incumbent=incumbent, band=self.band
+            )
             try:
                 for _ in manager.rounds():
                     self.rounds += 1
@@ -377,7 +390,15 @@ class _Search:
             self.ledger.left(item.composition.name, item.bound, _BOUND_NAME[item.kind], best)
         if self.beyond[0]:
             self.ledger.beyond(self.beyond[0], self.beyond[1], TOOL_SPEED, best)
-        return self.ledger.certificate(self.best.composition if self.best else None, best, ended)
+        winner = self._winner()
+        if winner is None:
+            return self.ledger.certificate(None, best, ended)
+        return self.ledger.certificate(winner.composition, winner.cost, ended, best)
+
+    def _winner(self) -> CandidateResult | None:
+        """The best verified result by the task's objective (:func:`~modular_robots.pipeline.ranked`)."""
+        best = ranked(self.results.values(), self.scenario)
+        return best[0] if best else None
 
     def _finish(self, recorder: RunRecorder, certificate: Certificate, start: float) -> SearchResult:
         results = self._ranked()
@@ -390,10 +411,11 @@ class _Search:
                 message = "no composition verified; "
                 recorder.finish("infeasible" if not results else "failed", message + certificate.line())
             raise InfeasibleError(message + certificate.line())
-        winner = self.best
+        winner = self._winner()
+        assert winner is not None  # there is a best verified result
         if winner.trajectory is None:  # found in an earlier session: solved again (deterministic)
             winner = _solve(self.scenario, self.specs[winner.name], winner)
-            self.best = winner
+            self.results[winner.name] = winner
         recorder.record_winner(
             winner,
             f"{self.scenario.name}: best-first search",
@@ -405,10 +427,9 @@ class _Search:
         return SearchResult(tuple(self._ranked()), winner, self.summary, self.rounds, dict(self.seconds), certificate)
 
     def _ranked(self) -> list[CandidateResult]:
-        results = dict(self.results)
-        if self.best is not None:
-            results[self.best.name] = self.best
-        return sorted(results.values(), key=lambda r: (r.status != CandidateStatus.OPTIMAL, r.cost, r.name))
+        """Every result: the verified by the task's objective, then the others by cost."""
+        rest = (r for r in self.results.values() if r.status != CandidateStatus.OPTIMAL)
+        return ranked(self.results.values(), self.scenario) + sorted(rest, key=lambda r: (r.cost, r.name))
 
     def _eta(self) -> float | None:
         """An estimate of the wall seconds of the relaxed step B still ahead [s]: every composition

@@ -16,12 +16,13 @@ import json
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import yourdfpy
 
 from .appearance import KIND_COLOURS, KIND_LABELS, colour_of_rgba
+from .costs import Design, Objective, parse_objective
 from .exceptions import InputError, shorten
 from .folder import ResultsFolder, atomic_write
 from .obstacles import obstacle_label
@@ -217,7 +218,7 @@ def panel(document: ResultDocument) -> str:
         rows.append(("torque use per joint", " ".join(f"{100 * u:.0f}%" for u in used.effort)))
         rows.append(("speed use per joint", " ".join(f"{100 * u:.0f}%" for u in used.velocity)))
     figures = "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in rows)
-    ranking = _ranking(document.candidates, w.candidate)
+    ranking = _ranking(document.candidates, w.candidate, document.settings.cost)
     return (
         f"<h1>{e(w.composition)}</h1><p class='sub'>{e(document.scenario)}: the winner "
         f"({e(w.boundary_pair)} boundary pair)</p><table class='figures'>{figures}</table>"
@@ -246,26 +247,54 @@ def _legend() -> str:
     )
 
 
-def _ranking(candidates: tuple[CandidateRecord, ...], winner: str, limit: int = 60) -> str:
-    def key(c: CandidateRecord):
-        return (c.status != CandidateStatus.OPTIMAL, c.cost if c.cost is not None else np.inf, c.candidate)
-
-    ranked = sorted(candidates, key=key)
+def _ranking(candidates: tuple[CandidateRecord, ...], winner: str, cost: str, limit: int = 60) -> str:
+    """The table of candidates: the verified ranked by the task's objective (``cost``, its
+    descriptor; a lexicographic order's tie-breaks get a column each), then the others by cost."""
+    objective = _objective(cost)
+    verified = [c for c in candidates if c.status == CandidateStatus.OPTIMAL and c.cost is not None]
+    if objective.then and all(c.design is not None for c in verified):
+        verified = objective.rank(
+            verified, lambda c: cast(float, c.cost), lambda c: cast(Design, c.design), lambda c: c.candidate
+        )
+    else:
+        verified.sort(key=lambda c: (cast(float, c.cost), c.candidate))
+        objective = Objective(objective.terms)  # no design recorded: no tie-break columns
+    chosen = {id(c) for c in verified}
+    rest = sorted(
+        (c for c in candidates if id(c) not in chosen),
+        key=lambda c: (c.cost if c.cost is not None else np.inf, c.candidate),
+    )
+    ranked = verified + rest
     e = html.escape
-    lines = ["<table class='ranking'><tr><th>#</th><th>candidate</th><th>status</th><th>cost</th><th>iterations</th>"]
+    extra = "".join(f"<th>{e(name)}</th>" for name in objective.then)
+    lines = [
+        f"<table class='ranking'><tr><th>#</th><th>candidate</th><th>status</th><th>cost</th>{extra}<th>iterations</th>"
+    ]
     for rank, c in enumerate(ranked[:limit], 1):
-        cost = _figure(c.cost, 1, ".4g")
+        cost_text = _figure(c.cost, 1, ".4g")
         status = c.status + (f" at {c.pruned_at_iteration}" if c.pruned_at_iteration is not None else "")
         mark = " class='winner'" if c.candidate == winner else ""
         iterations = "-" if c.iterations is None else c.iterations
+        breaks = "".join(
+            f"<td>{'-' if c.design is None else _figure(getattr(c.design, name), 1, '.4g')}</td>"
+            for name in objective.then
+        )
         lines.append(
-            f"<tr{mark}><td>{rank}</td><td>{e(c.candidate)}</td><td>{e(status)}</td><td>{cost}</td>"
-            f"<td>{iterations}</td></tr>"
+            f"<tr{mark}><td>{rank}</td><td>{e(c.candidate)}</td><td>{e(status)}</td><td>{cost_text}</td>"
+            f"{breaks}<td>{iterations}</td></tr>"
         )
     lines.append("</table>")
     if len(ranked) > limit:
         lines.append(f"<p class='sub'>… and {len(ranked) - limit} more (result.json)</p>")
     return "".join(lines)
+
+
+def _objective(cost: str) -> Objective:
+    """The objective a document names (an unreadable one ranks by the cost alone)."""
+    try:
+        return parse_objective(cost)
+    except ValueError:
+        return Objective()
 
 
 # -- the page -------------------------------------------------------------------------------------

@@ -113,7 +113,7 @@ def test_a_cost_defined_outside_the_package_is_minimised_by_step_c():
 
 def test_the_scenario_reader_and_the_solver_table_name_the_same_solvers():
     assert tuple(solvers.SOLVERS) == scenario_module.SOLVERS
-    assert tuple(COSTS) == ("time", "effort")
+    assert tuple(COSTS) == ("time", "effort", "energy", "mass", "joints", "modules", "price")
     assert isinstance(ShootingSolver(ShootingProblem(planar_arm(), ARM_START, ARM_GOAL)), solvers.Solver)
     with pytest.raises(solvers.UnknownSolverError, match=r"unknown solver 'nope'; expected one of \['trust-constr'\]"):
         solvers.make_solver("nope", ShootingProblem(planar_arm(), ARM_START, ARM_GOAL))

@@ -31,7 +31,7 @@ def _line(text: str, needle: str) -> int:
             "id: J2\n",
             "id: J9\n    colour: red\n",
             "modules[2].colour",
-            "unknown key (expected one of: armature, collision, com, diameter, id, inertia, joint, kind, length, limits, mass, twist_in_deg, twist_out_deg)",
+            "unknown key (expected one of: armature, collision, com, diameter, id, inertia, joint, kind, length, limits, mass, price, twist_in_deg, twist_out_deg)",
         ),
         ("    mass: 0.9\n", "    mass: -1\n", "modules[2].mass", "expected a number > 0, got -1"),
         ("    mass: 0.9\n", "    mass: heavy\n", "modules[2].mass", "expected a number, got the string 'heavy'"),
@@ -279,12 +279,17 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
             "task.goal: expected 3 numbers, got 2",
         ),
         ("payload: 50.0", "payload: -5", "payload:", "task.payload: expected a number >= 0, got -5"),
-        ("cost: time", "cost: energy", "cost:", "task.cost: expected one of time, effort; got 'energy'"),
+        (
+            "cost: time",
+            "cost: enrgy",
+            "cost:",
+            "task.cost: expected one of time, effort, energy, mass, joints, modules, price; got 'enrgy'",
+        ),
         (
             "  cost: time",
             "  cost: time\n  speed: 3",
             "speed:",
-            "task.speed: unknown key (expected one of: cost, floor, goal, obstacles, payload, self_collision, start)",
+            "task.speed: unknown key (expected one of: cost, floor, goal, max_time, obstacles, payload, self_collision, start)",
         ),
         (
             "  cost: time",
@@ -404,7 +409,11 @@ def test_catalogue_error_inside_a_scenario_names_the_catalogue(tmp_path):
 @pytest.mark.parametrize(
     ("old", "new", "start"),
     [
-        ("cost: time", "cost: " + "x" * 30000, "task.cost: expected one of time, effort; got 'xxx"),
+        (
+            "cost: time",
+            "cost: " + "x" * 30000,
+            "task.cost: expected one of time, effort, energy, mass, joints, modules, price; got 'xxx",
+        ),
         ("rule: ratio", "rule: " + "r" * 30000, "pruning.rule: expected one of ratio, paper, none; got 'rrr"),
         ("name: paper", "name: paper\n? " + "k" * 30000 + "\n: 1", "kkk"),
         ("name: paper", "name: paper\ncatalog_x: " + "v" * 30000, "catalog_x: unknown key"),

@@ -594,7 +594,7 @@ def test_the_defaults_keep_a_slow_winner_that_the_trusted_reference_prunes():
     assert new["hopeless"].status == "pruned" and new["hopeless"].pruned_at_iteration == 4
     assert "ratio rule: trusted cost 5 is 2.50x the reference 2" in new["hopeless"].reason
     assert new["beyond"].status == "pruned" and new["beyond"].pruned_at_iteration == 4
-    assert "by the bound: no motion of it is faster than 2.1, above the best verified cost 2" in new["beyond"].reason
+    assert "by the bound: no plan of it costs less than 2.1, above the best verified cost 2" in new["beyond"].reason
 
 
 def test_admission_by_bound_drops_a_candidate_before_its_first_iteration():
@@ -623,7 +623,7 @@ def test_admission_by_bound_drops_a_candidate_before_its_first_iteration():
     c = results["c"]
     assert (c.status, c.iterations, c.pruned_at_iteration) == ("pruned", 0, 0)
     assert c.reason == (
-        "pruned at iteration 0 by the bound: no motion of it is faster than 2, above the best verified cost 1.3"
+        "pruned at iteration 0 by the bound: no plan of it costs less than 2, above the best verified cost 1.3"
     )
     everyone, _ = run_fakes(scripts, "ratio", **BARE)
     assert everyone["c"].iterations > 0

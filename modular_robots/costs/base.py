@@ -7,17 +7,40 @@ A cost is one file in this package (a class implementing :class:`Cost`) and one 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
 if TYPE_CHECKING:
     from scipy import sparse
 
-__all__ = ["Cost", "Problem", "Motion", "Bounds", "Evaluated"]
+__all__ = [
+    "Cost",
+    "Problem",
+    "Motion",
+    "Bounds",
+    "Evaluated",
+    "Design",
+    "continuation",
+    "trapezoid_weights",
+    "interval_gradient",
+]
 
 #: The scaled cost and, when asked, its gradient with respect to the scaled variables.
 Evaluated = tuple[float, np.ndarray | None]
+
+
+@dataclass(frozen=True)
+class Design:
+    """What a robot is made of, for the costs of its design (:mod:`~.design`): the modules' mass
+    [kg] (no payload), the number of joints and of modules, and the sum of the modules' catalogue
+    prices (None when a module has none)."""
+
+    mass: float
+    joints: int
+    modules: int
+    price: float | None = None
 
 
 class Problem(Protocol):
@@ -33,6 +56,8 @@ class Problem(Protocol):
     tf_guess: float
     variable_scale: np.ndarray
     tau_scale: np.ndarray
+    #: The robot's design (None for a robot read from a URDF alone).
+    design: Design | None
 
     @property
     def interval_columns(self) -> np.ndarray:
@@ -42,9 +67,16 @@ class Problem(Protocol):
 
 
 class Motion(Protocol):
-    """The propagated motion: torques ``(N, S + 1, nv)`` [N m | N] at the sub-step points of each
-    interval and, when derivatives are asked, their sensitivities ``(N, S + 1, nv, p)`` to the
-    interval's parameters."""
+    """The propagated motion: states ``(N, S + 1, 2 nv)`` (positions then velocities [rad | m,
+    rad/s | m/s]) and torques ``(N, S + 1, nv)`` [N m | N] at the sub-step points of each interval
+    and, when derivatives are asked, their sensitivities ``(N, S + 1, 2 nv, p)`` and ``(N, S + 1,
+    nv, p)`` to the interval's parameters."""
+
+    @property
+    def states(self) -> np.ndarray: ...
+
+    @property
+    def state_sens(self) -> np.ndarray | None: ...
 
     @property
     def torques(self) -> np.ndarray: ...
@@ -56,18 +88,29 @@ class Motion(Protocol):
 class Bounds(Protocol):
     """What a cost's lower bound reads of the robot (:class:`~modular_robots.robot.RobotModel`)."""
 
+    #: The robot's design (None for a robot read from a URDF alone).
+    design: Design | None
+
     def travel_time_bound(self, q_a: np.ndarray, q_b: np.ndarray, velocity: np.ndarray | None = None) -> float: ...
 
 
 @runtime_checkable
 class Cost(Protocol):
-    """A cost of a point-to-point motion, at rest at both ends."""
+    """A cost of a point-to-point motion, at rest at both ends.
 
-    #: The cost's name in a scenario's ``task.cost`` and in ``result.json``.
-    name: ClassVar[str]
-    #: False when :meth:`lower_bound` is 0 for every move: step D then needs no robot model to
-    #: bound a candidate before its solve.
-    bounded: ClassVar[bool]
+    A cost may also have a ``continuation`` attribute: the smoother costs step C solves first
+    (:func:`continuation`), e.g. the energy with a rounder absolute value."""
+
+    @property
+    def name(self) -> str:
+        """The cost's name in a scenario's ``task.cost`` and in ``result.json``."""
+        ...
+
+    @property
+    def bounded(self) -> bool:
+        """False when :meth:`lower_bound` is 0 for every move: step D then needs no robot model to
+        bound a candidate before its solve."""
+        ...
 
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
         """A valid lower bound [SI] on the optimal cost of the move from ``q_start`` to ``q_goal``
@@ -84,3 +127,29 @@ class Cost(Protocol):
         """The exact Hessian of the scaled cost, as a function of the scaled variables, or None:
         the solver then approximates it (SR1)."""
         ...
+
+
+def continuation(cost: Cost) -> tuple[Cost, ...]:
+    """The smoother costs step C solves before ``cost``, smoothest first, each solve starting from
+    the previous one's optimum: a cost's optional ``continuation`` attribute (none: ``()``)."""
+    return tuple(getattr(cost, "continuation", ()))
+
+
+def trapezoid_weights(problem: Problem) -> np.ndarray:
+    """``(S + 1,)``: the trapezoid rule's weights of an interval's sub-step points, in normalised
+    time (a point's ``dt`` is ``tf`` times its weight; they sum to ``1 / N``)."""
+    N, S = problem.intervals, problem.substeps
+    weights = np.full(S + 1, 1.0 / (N * S))
+    weights[[0, -1]] *= 0.5
+    return weights
+
+
+def interval_gradient(problem: Problem, local: np.ndarray) -> np.ndarray:
+    """The gradient ``(n_variables,)`` of a scaled cost [in ``tf_guess`` units] from its
+    derivatives ``(N, p)`` [SI] with respect to each interval's parameters ``(s_m, u_m, tf)``."""
+    grad = np.zeros(problem.n_variables)
+    cols = problem.interval_columns
+    mask = cols >= 0
+    np.add.at(grad, cols[mask], local[mask])
+    grad *= problem.variable_scale / problem.tf_guess
+    return grad

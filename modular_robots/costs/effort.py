@@ -6,7 +6,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import Bounds, Evaluated, Motion, Problem
+from .base import Bounds, Evaluated, Motion, Problem, interval_gradient, trapezoid_weights
 
 __all__ = ["Effort"]
 
@@ -23,23 +23,16 @@ class Effort:
         return 0.0
 
     def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
-        N, S = problem.intervals, problem.substeps
-        weights = np.full(S + 1, 1.0 / (N * S))
-        weights[[0, -1]] *= 0.5  # trapezoid in normalised time; dt = tf * weight
+        weights = trapezoid_weights(problem)
         ratio = motion.torques / problem.tau_scale
         per_interval = np.einsum("j,mjk->m", weights, ratio**2)
         cost = tf * per_interval.sum() / problem.tf_guess
         if not derivatives:
             return cost, None
         assert motion.torque_sens is not None, "the motion was propagated without sensitivities"
-        grad = np.zeros(problem.n_variables)
         local = 2.0 * tf * np.einsum("j,mjk,mjkp->mp", weights, ratio / problem.tau_scale, motion.torque_sens)
         local[:, -1] += per_interval
-        cols = problem.interval_columns
-        mask = cols >= 0
-        np.add.at(grad, cols[mask], local[mask])
-        grad *= problem.variable_scale / problem.tf_guess
-        return cost, grad
+        return cost, interval_gradient(problem, local)
 
     def hessian(self, problem: Problem) -> None:
         return None

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..catalog import Catalog
 from ..composition import Composition
+from ..costs import continuation
 from ..plan.boundary import BoundaryPair
 from ..plan.candidate import CandidateResult, CandidateStatus
 from ..plan.verification import Verification
@@ -179,6 +180,15 @@ class Candidate:
         y0: np.ndarray | None = None
         verification: Verification | None = None
         offset, cold, refined = 0, False, 0
+        longest, shortest = self.problem.max_time, self.problem.time_bound
+        if longest is not None and shortest > longest:
+            reason = (
+                f"cannot finish within task.max_time = {longest:g} s: no move of it within the velocity bounds is "
+                f"shorter than {shortest:.4g} s"
+            )
+            self._finish(CandidateStatus.FAILED, reason, None)
+            return
+        y0, offset = yield from self._continuation()
         for attempt in range(self.max_refinements + 2):  # + 1: the cold solve after a crossing
             outcome = yield from self._solve_restarting(self.problem, y0, offset, refined)
             swung = (
@@ -218,6 +228,23 @@ class Candidate:
             y0, refined = final.y, refined + 1
         assert verification is not None  # the loop is only left by a break, after a failed verification
         self._finish(CandidateStatus.FAILED, _verification_failure(verification) + self._note, verification)
+
+    def _continuation(self) -> Generator[Iterate, None, tuple[np.ndarray | None, int]]:
+        """Solve the objective's smoother stages (:func:`~modular_robots.costs.continuation`) in
+        turn, each from the last one's end; return where the solve of the objective itself starts
+        (None: its first guess) and the iterations so far. A stage that ends infeasible is not
+        followed: the objective is then solved from its first guess."""
+        final, y0, offset = self.problem, None, 0
+        for cost in continuation(final.objective):
+            self.problem = final.with_objective(cost)
+            outcome = yield from self._solve(self.problem, y0, offset, 0)
+            offset = self.last.iteration if self.last is not None else offset
+            if outcome.final is None or outcome.final.constraint_violation > self.problem.settings.constraint_tolerance:
+                y0 = None
+                break
+            y0 = outcome.final.y
+        self.problem = final
+        return y0, offset
 
     def _solve_restarting(
         self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int
@@ -332,11 +359,12 @@ def composition_problem(
         q_start,
         q_goal,
         task.collision_obstacles,
-        task.cost,
+        task.cost.cost,
         settings,
         self_collision=task.self_collision,
         orientations=(task.start_orientation, task.goal_orientation),
         free_ends=task_ends(task) if settings.free_ends else None,
+        max_time=task.max_time,
     )
 
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from ..costs import Cost, DesignCost, WeightedSum
 from ..ik import DEFAULT_TOLERANCE
 from ..orientation import Orientation
 from ..robot import RobotModel
@@ -95,12 +96,17 @@ def task_ends(task: Task) -> tuple[ToolEnd, ToolEnd]:
     )
 
 
-def free_ends_bound(cost: str, robot: RobotModel, ends: tuple[ToolEnd, ToolEnd], velocity_bound: np.ndarray) -> float:
-    """A lower bound of the cost with free ends: for the time, the distance the tool must travel
+def free_ends_bound(cost: Cost, robot: RobotModel, ends: tuple[ToolEnd, ToolEnd], velocity_bound: np.ndarray) -> float:
+    """A lower bound of ``cost`` with free ends: for the time, the distance the tool must travel
     between the two tolerated positions over the largest speed it can have
-    (:meth:`~modular_robots.robot.RobotModel.tool_speed_bound` at ``velocity_bound``) [s]; 0 for
-    another cost (step B's configurations bound the joints' travel only when the ends are fixed)."""
-    if cost != "time":
+    (:meth:`~modular_robots.robot.RobotModel.tool_speed_bound` at ``velocity_bound``) [s]; for a
+    cost of the design, its value; for a weighted sum, the sum of its terms' bounds; 0 for another
+    cost (step B's configurations bound the joints' travel only when the ends are fixed)."""
+    if isinstance(cost, WeightedSum):
+        return sum(w * free_ends_bound(c, robot, ends, velocity_bound) for c, w in cost.terms)
+    if isinstance(cost, DesignCost):
+        return cost.value(robot.design)
+    if cost.name != "time":
         return 0.0
     start, goal = ends
     gap = math.dist(start.position, goal.position) - start.tolerance - goal.tolerance

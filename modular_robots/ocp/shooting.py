@@ -31,6 +31,7 @@ The problem is a plain object: it evaluates cost, constraints and their derivati
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -119,6 +120,7 @@ class ShootingProblem:
         self_collision: bool = True,
         orientations: tuple[Orientation | None, Orientation | None] = (None, None),
         free_ends: tuple[ToolEnd, ToolEnd] | None = None,
+        max_time: float | None = None,
     ):
         if robot.nq != robot.nv:
             raise ProblemError(
@@ -130,6 +132,12 @@ class ShootingProblem:
         if isinstance(cost, str) and cost not in COSTS:
             raise ProblemError(f"unknown cost {cost!r}; expected one of {list(COSTS)}")
         self.robot = robot
+        self.design = robot.design
+        if max_time is not None and not (math.isfinite(max_time) and max_time > 0.0):
+            raise ProblemError(f"max_time must be a positive number of seconds, got {max_time}")
+        #: The longest the motion may take [s] (None: no limit but the solver's own, 1000 times
+        #: the first guess's duration).
+        self.max_time = max_time
         self.settings = settings
         #: What the problem minimises (:mod:`~modular_robots.costs`).
         self.objective: Cost = COSTS[cost] if isinstance(cost, str) else cost
@@ -193,7 +201,13 @@ class ShootingProblem:
         self.cost_bound = (
             self.objective.lower_bound(robot, self.q_start, self.q_goal, self.velocity_bound)
             if free_ends is None
-            else free_ends_bound(self.cost_name, robot, free_ends, self.velocity_bound)
+            else free_ends_bound(self.objective, robot, free_ends, self.velocity_bound)
+        )
+        #: A lower bound on the move's duration [s] (the time cost's bound, whatever the cost).
+        self.time_bound = (
+            COSTS["time"].lower_bound(robot, self.q_start, self.q_goal, self.velocity_bound)
+            if free_ends is None
+            else free_ends_bound(COSTS["time"], robot, free_ends, self.velocity_bound)
         )
         self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
         self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
@@ -223,7 +237,8 @@ class ShootingProblem:
         guess_u = self.transcription.initial_controls(robot, guess_nodes[:-1, :nv], guess_nodes[:-1, nv:], guess_acc)
         if self.transcription.controls_are_torques:
             guess_u = np.clip(guess_u, -self.effort_bound, self.effort_bound)
-        self._guess = self.pack(self.tf_guess, guess_nodes, guess_u)
+        first_tf = self.tf_guess if max_time is None else min(self.tf_guess, max_time)
+        self._guess = self.pack(first_tf, guess_nodes, guess_u)
         self._build_bounds()
         self._build_pattern()
         self._cache: tuple[bytes, Evaluation] | None = None
@@ -254,6 +269,24 @@ class ShootingProblem:
         velocity profile, ``tf`` from the velocity limits (scaled)."""
         return self._guess.copy()
 
+    def with_objective(self, cost: Cost) -> ShootingProblem:
+        """The same problem minimising ``cost`` (its variables and scaling unchanged): a stage of
+        the objective's continuation."""
+        return ShootingProblem(
+            self.robot,
+            self.q_start,
+            self.q_goal,
+            self.obstacles,
+            cost,
+            self.settings,
+            self.substeps,
+            self.waypoints,
+            self.self_collision is not None,
+            self.orientations,
+            self.free_ends,
+            self.max_time,
+        )
+
     def refined(self, substeps: int | None = None, waypoints: np.ndarray | None = None) -> ShootingProblem:
         """The same problem with ``substeps`` per interval (decision vectors carry over as they
         are) or with the initial guess along ``waypoints`` (they do not: the scaling follows the
@@ -270,6 +303,7 @@ class ShootingProblem:
             self.self_collision is not None,
             self.orientations,
             self.free_ends,
+            self.max_time,
         )
 
     def _configuration(self, q, label) -> np.ndarray:
@@ -316,7 +350,8 @@ class ShootingProblem:
         lb = np.concatenate(
             [[1e-3 * self.tf_guess], np.tile(x_lo, N - 1), np.tile(u_lo, N), np.tile(robot.lower, ends)]
         )
-        ub = np.concatenate([[1e3 * self.tf_guess], np.tile(x_hi, N - 1), np.tile(u_hi, N), np.tile(robot.upper, ends)])
+        longest = 1e3 * self.tf_guess if self.max_time is None else min(1e3 * self.tf_guess, self.max_time)
+        ub = np.concatenate([[longest], np.tile(x_hi, N - 1), np.tile(u_hi, N), np.tile(robot.upper, ends)])
         self.variable_lower = lb / self.variable_scale
         self.variable_upper = ub / self.variable_scale
         self._x_lo, self._x_hi = x_lo, x_hi

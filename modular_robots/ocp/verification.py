@@ -188,4 +188,5 @@ def verify(
         tuple(map(float, vel_share)),
         tuple(map(float, tau_share)),
         excess,
+        max(tf / problem.max_time - 1.0, 0.0) if problem.max_time is not None else 0.0,
     )

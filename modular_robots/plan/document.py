@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..composition import Composition
+from ..costs import Design, design_of
 from ..exceptions import InputError, shorten
 from ..obstacles import obstacle_to_json
 from .boundary import BoundaryPair
@@ -80,7 +82,7 @@ def settings_json(scenario: Scenario, **extra: Any) -> dict:
     return {
         "optimizer": asdict(scenario.optimizer),
         "pruning": asdict(scenario.pruning),
-        "cost": scenario.task.cost,
+        "cost": str(scenario.task.cost),
         "payload": scenario.task.payload,
         **extra,
     }
@@ -93,11 +95,12 @@ def task_json(task: Task) -> dict:
         "start": list(task.start),
         "goal": list(task.goal),
         "obstacles": [obstacle_to_json(o) for o in task.collision_obstacles],
-        "cost": task.cost,
+        "cost": str(task.cost),
         "start_orientation": task.start_orientation.to_json() if task.start_orientation else None,
         "goal_orientation": task.goal_orientation.to_json() if task.goal_orientation else None,
         "start_tolerance": task.start_tolerance,
         "goal_tolerance": task.goal_tolerance,
+        "max_time": task.max_time,
     }
 
 
@@ -111,10 +114,12 @@ def verification_json(v: Verification) -> dict:
     return out
 
 
-def candidate_json(r: CandidateResult) -> dict:
-    """One entry of ``candidates`` (non-finite numbers as ``null``)."""
+def candidate_json(r: CandidateResult, design: Design | None = None) -> dict:
+    """One entry of ``candidates`` (non-finite numbers as ``null``), with its composition's
+    ``design`` (mass, joints, modules, price: what the costs of the design read) when given."""
     return {
         "composition": r.composition or r.name,
+        "design": asdict(design) if design is not None else None,
         "candidate": r.name,
         "boundary_pair": str(r.boundary_pair),
         "dof": r.dof,
@@ -135,6 +140,13 @@ def candidate_json(r: CandidateResult) -> dict:
         "violation_history": [_finite(c) for c in r.violation_history],
         "refinement_history": list(r.refinement_history),
     }
+
+
+def _design(r: CandidateResult, scenario: Scenario) -> Design | None:
+    try:
+        return design_of(Composition.from_name(r.composition or r.name, scenario.catalog).modules, scenario.catalog)
+    except (InputError, ValueError):  # a name the catalogue does not know (an optimize run's own)
+        return None
 
 
 def candidate_summary_json(r: CandidateResult) -> dict:
@@ -234,7 +246,9 @@ def result_json(
         "task": task_json(scenario.task),
         "counts": counts,
         "seconds": {k: round(v, 4) for k, v in seconds.items()},
-        "candidates": [(candidate_summary_json if short else candidate_json)(r) for r in results],
+        "candidates": [
+            candidate_summary_json(r) if short else candidate_json(r, _design(r, scenario)) for r in results
+        ],
         "winner": winner,
         "totals": {
             "optimizer_iterations": int(sum(r.iterations for r in results)),
@@ -329,6 +343,15 @@ def _task(n: Node) -> TaskRecord:
     )
 
 
+def _design_record(n: Node) -> Design:
+    return Design(
+        mass=n["mass"].number(0.0),
+        joints=n["joints"].integer(),
+        modules=n["modules"].integer(),
+        price=_nullable(n["price"], 0.0),
+    )
+
+
 def _nullable(n: Node, minimum: float = -math.inf) -> float | None:
     return n.optional(lambda m: m.number(minimum))
 
@@ -348,6 +371,7 @@ def _verification(n: Node) -> VerificationRecord:
         effort_share=n["effort_share"].numbers(0.0),
         orientation_excess=n["orientation_excess"].number(0.0) if n.has("orientation_excess") else 0.0,
         passed=n["passed"].boolean(),
+        duration_excess=n["duration_excess"].number(0.0) if n.has("duration_excess") else 0.0,
     )
 
 
@@ -359,6 +383,7 @@ def _candidate(n: Node) -> CandidateRecord:
         candidate=name,
         status=status,
         composition=n["composition"].string(),
+        design=n["design"].optional(_design_record) if n.has("design") else None,
         boundary_pair=BoundaryPair(n["boundary_pair"].string(tuple(BoundaryPair))),
         dof=n["dof"].integer(),
         q_start=n["q_start"].numbers(),

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import astuple, dataclass, field, fields
 from typing import Any
 
+from ..costs import Design
 from ..obstacles import Obstacle
 from .boundary import BoundaryPair
 from .candidate import CandidateStatus
@@ -105,6 +106,7 @@ class VerificationRecord:
     effort_share: tuple[float, ...]
     orientation_excess: float
     passed: bool
+    duration_excess: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -116,6 +118,8 @@ class CandidateRecord:
     candidate: str
     status: CandidateStatus
     composition: str | None = None
+    #: What the composition is made of (None in a document written before it was recorded).
+    design: Design | None = None
     boundary_pair: BoundaryPair | None = None
     dof: int | None = None
     q_start: tuple[float, ...] = ()

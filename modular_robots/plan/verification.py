@@ -43,7 +43,9 @@ class Verification:
     ``effort_share``: per joint, the largest ``|value| / limit`` on the grid (between the plan's
     rows too, where a torque can exceed its value at the rows); ``orientation_excess`` [rad]: at
     the ends of the plan, by how much the angle between the tool's orientation and the one the
-    task asks there exceeds its tolerance (0 within it, or when the task asks none).
+    task asks there exceeds its tolerance (0 within it, or when the task asks none);
+    ``duration_excess``: by how much ``tf`` exceeds the task's ``max_time``, relative to it (0
+    within it, or when the task sets none).
     """
 
     terminal_error: float
@@ -58,6 +60,11 @@ class Verification:
     velocity_share: tuple[float, ...] = ()
     effort_share: tuple[float, ...] = ()
     orientation_excess: float = 0.0
+    duration_excess: float = 0.0
+
+    @property
+    def duration_ok(self) -> bool:
+        return self.duration_excess <= LIMIT_TOLERANCE
 
     @property
     def terminal_ok(self) -> bool:
@@ -85,4 +92,11 @@ class Verification:
 
     @property
     def passed(self) -> bool:
-        return self.terminal_ok and self.defect_ok and self.limits_ok and self.clearance_ok and self.orientation_ok
+        return (
+            self.terminal_ok
+            and self.defect_ok
+            and self.limits_ok
+            and self.clearance_ok
+            and self.orientation_ok
+            and self.duration_ok
+        )
