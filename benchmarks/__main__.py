@@ -1,6 +1,6 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
 runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite, timor,
-engines, search). RESULTS.md is rewritten at the end.
+engines, search, costs). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -10,6 +10,7 @@ import sys
 from modular_robots.execution import single_threaded_blas
 
 from . import (
+    bench_costs,
     bench_engines,
     bench_feasibility,
     bench_ipopt,
@@ -38,6 +39,7 @@ BENCHES = {
     "timor": bench_timor,
     "engines": bench_engines,
     "search": bench_search,
+    "costs": bench_costs,
 }
 
 with single_threaded_blas():

@@ -280,6 +280,38 @@ def _search_lines() -> list[str]:
     ]
 
 
+def _costs_lines() -> list[str]:
+    """Minimum energy and the lexicographic order (``bench_costs.py``)."""
+    doc = _load("costs")
+    if not doc:
+        return []
+    lines = [
+        "## Costs: minimum energy, and ties broken toward simpler robots",
+        "",
+        _measured(doc)
+        + f" Load average {doc['load_average_before']:.1f} before, {doc['load_average_after']:.1f} after; each row "
+        "one `run` as a whole process on 2 cores.",
+        "",
+        "| scenario | cost | rule | verified / candidates | failed | iterations | wall s | winner | cost | tf s | "
+        "modules, mass kg | fastest verified | modules among the verified |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in doc["rows"]:
+        lines.append(
+            f"| {r['scenario']} | `{r['cost']}` | {r['rule']} | {r['verified']} / {r['candidates']} | {r['failed']} | "
+            f"{r['iterations']} | {_fmt(r['wall_s'])} | {r['winner']} | {r['winner_cost']:.4g} | "
+            f"{r['winner_tf']:.4g} | {r['winner_modules']}, {r['winner_mass']:.4g} | {r['fastest']} | "
+            f"{', '.join(map(str, r['modules_of_verified']))} |"
+        )
+    return lines + [
+        "",
+        "The energy is in J (`abs` of the drives' total power rounded off below 0.1 W, solved at 1 W first); "
+        "the time in s. `verified / candidates` with `--rule none` is the share of candidates whose solve "
+        "converged to a verified plan.",
+        "",
+    ]
+
+
 def _engines_lines() -> list[str]:
     """The engines side by side (``bench_engines.py``)."""
     doc = _load("engines")
@@ -500,6 +532,7 @@ def build() -> str:
         lines.append("")
     lines += _suite_lines()
     lines += _search_lines()
+    lines += _costs_lines()
     lines += _engines_lines()
     margins = _load("margins")
     if margins:

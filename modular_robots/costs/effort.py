@@ -13,7 +13,8 @@ __all__ = ["Effort"]
 
 class Effort:
     """``integral of sum_i (tau_i / tau_max,i)^2 dt`` [s], by the trapezoid rule over every
-    interval's sub-steps. No bound is known before a solve (0): the ratio rule alone prunes. Its
+    interval's sub-steps. No bound is known before a solve (0): pruning's gate then keeps every
+    candidate to its end. Its
     Hessian is approximated (SR1)."""
 
     name: ClassVar[str] = "effort"

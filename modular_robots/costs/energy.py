@@ -32,7 +32,8 @@ class Energy:
     (:attr:`continuation`).
 
     No bound is used before a solve (0): the change of potential energy between the ends bounds
-    the exact integral, but not its smoothed quadrature, so the ratio rule alone prunes. Its
+    the exact integral, but not its smoothed quadrature. Without a bound, pruning's gate keeps every
+    candidate (a bound below ``gate`` times the best lets nothing but the bound prune it). Its
     Hessian is approximated (SR1)."""
 
     name: ClassVar[str] = "energy"
