@@ -54,7 +54,7 @@ def run_table(result, scenario, search: dict | None = None) -> str:
             + ("" if w.boundary_pair == BoundaryPair.FASTEST else f" (from its {w.boundary_pair} boundary pair)"),
         ),
         ("tf [s]", f"{w.tf:.4f}"),
-        (f"cost ({scenario.task.cost})", f"{w.cost:.4g}"),
+        (f"cost ({scenario.task.cost})", f"{w.cost:.4g}" + (f" {unit}" if (unit := scenario.task.cost.unit) else "")),
         *_tie_break_row(result, scenario),
         (
             "verification",
@@ -99,7 +99,7 @@ def _tie_break_row(result, scenario) -> list[tuple[str, str]]:
     def design(c):
         return design_of(Composition.from_name(c.composition or c.name, scenario.catalog).modules, scenario.catalog)
 
-    values = ", ".join(f"{name} {COSTS[name].value(design(result.winner)):.4g}" for name in objective.then)  # type: ignore[attr-defined]
+    values = ", ".join(_with_unit(name, COSTS[name].value(design(result.winner))) for name in objective.then)  # type: ignore[attr-defined]
     return [
         (
             "tie-break",
@@ -107,6 +107,11 @@ def _tie_break_row(result, scenario) -> list[tuple[str, str]]:
             f"(of {len(verified)} verified)",
         )
     ]
+
+
+def _with_unit(name: str, value: float) -> str:
+    unit = getattr(COSTS[name], "unit", "")
+    return f"{name} {value:.4g}" + (f" {unit}" if unit else "")
 
 
 def _unconverged_row(result, scenario) -> list[tuple[str, str]]:

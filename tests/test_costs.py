@@ -17,6 +17,7 @@ import pinocchio as pin
 import pytest
 import yaml
 
+from modular_robots.bounds import catalog_bound
 from modular_robots.composition import Composition
 from modular_robots.costs import (
     COSTS,
@@ -38,6 +39,7 @@ from modular_robots.plan.candidate import CandidateStatus
 from modular_robots.pruning import bound_rule
 from modular_robots.robot import COULOMB_SMOOTHING, robot_model
 from modular_robots.scenario import load_scenario
+from modular_robots.search import search_scenario
 
 from .helpers.models import ARM_GOAL, ARM_START, planar_arm
 from .helpers.paths import ROOT
@@ -339,3 +341,25 @@ def test_the_continuation_solves_a_rounder_energy_first_in_a_sum_too():
     assert time_term is COSTS["time"] and (w_time, w_energy) == (1.0, 0.01)
     assert energy_term.smoothing == FIRST_SMOOTHING
     assert continuation(COSTS["time"]) == () and continuation(parse_objective("time + 0.1*mass").cost) == ()
+
+
+# -- the search and the bounds with the new objectives ---------------------------------------------
+@pytest.mark.parametrize(
+    "cost", ["time + 0.2*mass", "time then modules, mass within 0.2"], ids=["weighted-sum", "lexicographic"]
+)
+def test_the_best_first_search_certifies_the_exhaustive_winner_of_a_sum_and_an_order(cost, tmp_path):
+    scenario = load_scenario(ROOT / "tests" / "data" / "small-fast.yaml")
+    scenario = replace(scenario, task=replace(scenario.task, cost=parse_objective(cost)))
+    searched = search_scenario(scenario, tmp_path / "search", jobs=1)
+    brute = run_scenario(replace(scenario, pruning=replace(scenario.pruning, rule="none")), None, jobs=1)
+    assert searched.winner.name == brute.winner.name
+    assert searched.winner.cost == pytest.approx(brute.winner.cost, rel=1e-9)
+    assert searched.certificate.certified and searched.certificate.total == searched.certificate.space
+    # every catalogue bound and every candidate's bound is below the candidate's verified optimum
+    for result in brute.candidates:
+        if result.status != CandidateStatus.OPTIMAL:
+            continue
+        composition = Composition.from_name(result.composition, scenario.catalog)
+        before = catalog_bound(composition, scenario.catalog, scenario.task, 1e-4).value
+        assert before <= result.cost * (1 + 1e-9), (result.name, before, result.cost)
+        assert before > 0.0 and result.cost_bound <= result.cost * (1 + 1e-9)

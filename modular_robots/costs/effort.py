@@ -18,6 +18,7 @@ class Effort:
     Hessian is approximated (SR1)."""
 
     name: ClassVar[str] = "effort"
+    unit: ClassVar[str] = "s"
     bounded: ClassVar[bool] = False
 
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:

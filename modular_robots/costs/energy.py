@@ -37,6 +37,7 @@ class Energy:
     Hessian is approximated (SR1)."""
 
     name: ClassVar[str] = "energy"
+    unit: ClassVar[str] = "J"
     bounded: ClassVar[bool] = False
 
     def __init__(self, smoothing: float = POWER_SMOOTHING):

@@ -84,6 +84,14 @@ class Objective:
         return str(self)
 
     @property
+    def unit(self) -> str:
+        """The unit of the value the winner is ranked by (``s``, ``J``, ``kg``...), or ``""`` when
+        it has none (a count, a weighted sum)."""
+        if len(self.terms) == 1 and self.terms[0][1] == 1.0:
+            return str(getattr(_costs()[self.terms[0][0]], "unit", ""))
+        return ""
+
+    @property
     def names(self) -> tuple[str, ...]:
         """Every cost the objective names, the sum's first."""
         return (*(n for n, _ in self.terms), *self.then)

@@ -21,6 +21,7 @@ class Time:
     (:meth:`~modular_robots.robot.RobotModel.travel_time_bound`)."""
 
     name: ClassVar[str] = "time"
+    unit: ClassVar[str] = "s"
     bounded: ClassVar[bool] = True
 
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
