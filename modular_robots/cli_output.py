@@ -116,7 +116,7 @@ def _with_unit(name: str, value: float) -> str:
 
 def _unconverged_row(result, scenario) -> list[tuple[str, str]]:
     settings = scenario.optimizer
-    below = result.unconverged_below_winner(settings.constraint_tolerance)
+    below = result.unconverged_below_winner(settings.constraint_tolerance, scenario.task.cost.band)
     if not below:
         return []
     best = below[0]
@@ -124,7 +124,8 @@ def _unconverged_row(result, scenario) -> list[tuple[str, str]]:
         (
             "not converged",
             f"{len(below)} failed at the iteration limit feasible at their nodes with a lower cost than "
-            f"the winner's (best {best.name}, {best.cost:.4g}); unranked; a higher optimizer.max_iterations "
+            + ("the winner's" if scenario.task.cost.band == 1.0 else "the tie band's")
+            + f" (best {best.name}, {best.cost:.4g}); unranked; a higher optimizer.max_iterations "
             f"(now {settings.max_iterations}) may let them converge",
         )
     ]

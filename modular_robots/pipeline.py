@@ -84,18 +84,22 @@ class RunResult:
     def iterations(self) -> int:
         return sum(c.iterations for c in self.candidates)
 
-    def unconverged_below_winner(self, constraint_tolerance: float) -> tuple[CandidateResult, ...]:
+    def unconverged_below_winner(self, constraint_tolerance: float, band: float = 1.0) -> tuple[CandidateResult, ...]:
         """The candidates that failed at the iteration limit with a plan feasible at its nodes
         (scaled constraint violation at most ``constraint_tolerance``) and a cost below the
-        winner's, lowest cost first. Only converged candidates are ranked (SPEC §2), so none of
-        these can win; a higher iteration limit might let one converge below the winner."""
+        winner's (with a lexicographic objective's tie ``band``: below the best verified cost
+        times it, where a robot may still win on its tie-breaks), lowest cost first. Only
+        converged candidates are ranked (SPEC §2), so none of these can win; a higher iteration
+        limit might let one converge and win."""
+        verified = [c.cost for c in self.candidates if c.status == CandidateStatus.OPTIMAL]
+        limit = min(verified, default=self.winner.cost) * band if band != 1.0 else self.winner.cost
         below = (
             c
             for c in self.candidates
             if c.status == CandidateStatus.FAILED
             and c.reason.startswith(ITERATION_LIMIT)
             and c.constraint_violation <= constraint_tolerance
-            and c.cost < self.winner.cost
+            and c.cost < limit
         )
         return tuple(sorted(below, key=lambda c: c.cost))
 

@@ -132,7 +132,10 @@ class RoundCosts:
 
 
 def ratio_rule(
-    view: RoundCosts, settings: PruningSettings = PruningSettings(), guard_violation: float = GUARD_VIOLATION
+    view: RoundCosts,
+    settings: PruningSettings = PruningSettings(),
+    guard_violation: float = GUARD_VIOLATION,
+    band: float = 1.0,
 ) -> dict[str, str]:
     """The candidates to prune after a round, each with the reason: those whose own iterate is
     trusted and whose cost exceeds the guarded reference by more than ``settings.threshold``
@@ -143,7 +146,8 @@ def ratio_rule(
     ``c_k - lookahead * (earlier[k] - c_k)`` is within the threshold: still converging towards it.
     With ``settings.patience > 0``, a candidate whose iterates have not been trusted for
     ``untrusted_for[k] >= patience`` iterations is pruned too, once a reference exists. A
-    candidate whose floor exceeds the threshold is pruned whatever its iterate; one absent from
+    candidate whose floor exceeds the threshold is pruned whatever its iterate, unless the floor is
+    within ``band`` (a lexicographic objective's tie band) of the reference; one absent from
     ``view.costs`` is judged on its floor only and is no reference.
     """
     if view.iteration < settings.start_iteration:
@@ -181,7 +185,7 @@ def ratio_rule(
             continue
         chosen[k] = versus("trusted cost", c)
     for k, b in view.floors.items():
-        if above(b) and k not in chosen:
+        if above(b) and b > reference * band and k not in chosen:
             chosen[k] = versus("lower bound", b)
     return chosen
 
@@ -386,7 +390,7 @@ class PruningManager:
                 if len(self.trusted[n]) == s.window + 1 and self.trusted[n][0] is not None
             }
         view = RoundCosts(round_, costs, violations, converged, earlier, self.untrusted_for, floors)
-        return {**ratio_rule(view, s, self.guard_violation), **bound_rule(bounds, converged, self.band)}
+        return {**ratio_rule(view, s, self.guard_violation, self.band), **bound_rule(bounds, converged, self.band)}
 
     def _remember(self, name: str, iterate: Iterate) -> None:
         previous = self.last.get(name)

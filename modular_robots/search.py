@@ -46,7 +46,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO
 
-from .bounds import IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, catalog_bound, joint_levers, objective_bound
+from .bounds import DESIGN, IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, catalog_bound, joint_levers, objective_bound
 from .certificate import Certificate, Ledger
 from .composition import Composition, enumerate_compositions
 from .costs import design_of
@@ -339,10 +339,11 @@ class _Search:
                     heapq.heappush(self.queues[_CANDIDATE], _Item(bound, order, _CANDIDATE, item.composition, spec))
 
     def _ik_bound(self, verdict: Verdict) -> float:
-        """The stage-1 bound of a composition through the relaxed step B: the joint travel time
-        of its fastest pair (:attr:`Verdict.time_bound`), less what the clusters' members may
-        differ by, within the limits verification allows (none for another cost than time, or
-        with free ends: step C then chooses its own ends)."""
+        """The stage-1 bound of a composition through the relaxed step B: for the objective's
+        time, the joint travel time of its fastest pair (:attr:`Verdict.time_bound`), less what
+        the clusters' members may differ by, within the limits verification allows (0 with free
+        ends: step C then chooses its own ends); with the objective's costs of the design
+        (:func:`~modular_robots.bounds.objective_bound`)."""
         objective, catalog = self.scenario.task.cost, self.scenario.catalog
         time = 0.0
         if "time" in dict(objective.terms) and not self.scenario.optimizer.free_ends and verdict.time_bound is not None:
@@ -387,13 +388,20 @@ class _Search:
     def _certificate(self, ended: str) -> Certificate:
         best = self._best_cost()
         for item in (item for queue in self.queues.values() for item in queue):
-            self.ledger.left(item.composition.name, item.bound, _BOUND_NAME[item.kind], best)
+            self.ledger.left(item.composition.name, item.bound, self._bound_name(item.kind), best)
         if self.beyond[0]:
-            self.ledger.beyond(self.beyond[0], self.beyond[1], TOOL_SPEED, best)
+            self.ledger.beyond(self.beyond[0], self.beyond[1], self._bound_name(_UNCHECKED), best)
         winner = self._winner()
         if winner is None:
             return self.ledger.certificate(None, best, ended)
         return self.ledger.certificate(winner.composition, winner.cost, ended, best)
+
+    def _bound_name(self, kind: int) -> str:
+        """The name the certificate gives a stage's bound (before step B without the time in the
+        objective: the costs of the design alone)."""
+        if kind == _UNCHECKED and "time" not in dict(self.scenario.task.cost.terms):
+            return DESIGN
+        return _BOUND_NAME[kind]
 
     def _winner(self) -> CandidateResult | None:
         """The best verified result by the task's objective (:func:`~modular_robots.pipeline.ranked`)."""

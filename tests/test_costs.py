@@ -31,14 +31,15 @@ from modular_robots.costs import (
 )
 from modular_robots.exceptions import ProblemError, ScenarioError
 from modular_robots.feasibility import check_composition
-from modular_robots.ocp.candidate import CandidateSpec, composition_problem, make_candidate
+from modular_robots.ocp.candidate import CandidateSpec, _verification_failure, composition_problem, make_candidate
 from modular_robots.ocp.shooting import ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
+from modular_robots.ocp.verification import verify
 from modular_robots.pipeline import run_scenario
 from modular_robots.plan.candidate import CandidateStatus
-from modular_robots.pruning import bound_rule
+from modular_robots.pruning import RoundCosts, bound_rule, ratio_rule
 from modular_robots.robot import COULOMB_SMOOTHING, robot_model
-from modular_robots.scenario import load_scenario
+from modular_robots.scenario import PruningSettings, load_scenario
 from modular_robots.search import search_scenario
 
 from .helpers.models import ARM_GOAL, ARM_START, planar_arm
@@ -152,8 +153,10 @@ def test_a_wrong_descriptor_says_what_is_wrong(text, message):
 @pytest.mark.parametrize(
     ("cost", "message"),
     [
-        ("{minimise: time, then: [modules], within: 0.01}", None),
-        ("{minimise: {time: 1.0, mass: 0.05}}", None),
+        ("{minimise: time, then: [modules], within: 0.05}", Objective((("time", 1.0),), ("modules",), 0.05)),
+        ("{minimise: time, then: [joints, mass]}", Objective((("time", 1.0),), ("joints", "mass"), 0.01)),
+        ("{minimise: {time: 1.0, mass: 0.05}}", Objective((("time", 1.0), ("mass", 0.05)))),
+        ("time + 1e+3*mass", Objective((("time", 1.0), ("mass", 1000.0)))),
         (
             "{minimise: tme}",
             "task.cost.minimise: expected one of time, effort, energy, mass, joints, modules, price; got 'tme'",
@@ -171,9 +174,9 @@ def test_the_scenario_reader_names_the_key_of_a_bad_cost(tmp_path, cost, message
     text = REACH.read_text().replace("catalog: catalogs/", f"catalog: {REACH.parent}/catalogs/")
     path = tmp_path / "scenario.yaml"
     path.write_text(text.replace("  cost: time", f"  cost: {cost}"))
-    if message is None:
+    if isinstance(message, Objective):
         objective = load_scenario(path).task.cost
-        assert objective == parse_objective(str(objective)) and objective != Objective()
+        assert objective == message and parse_objective(str(objective)) == objective
         return
     with pytest.raises(ScenarioError) as info:
         load_scenario(path)
@@ -239,9 +242,40 @@ def test_time_then_modules_on_reach_4dof_picks_a_smaller_robot_than_the_fastest(
     assert table.index(expected["candidate"]) < table.index(fastest["candidate"])
 
 
-def test_a_weighted_sum_is_a_cost_step_c_can_minimise():
-    assert isinstance(parse_objective("time + 0.05*mass").cost, WeightedSum)
+def test_a_sums_hessian_is_exact_only_when_every_terms_is():
+    problem = paper_problem()
+    y = problem.initial_guess()
+    with_mass = parse_objective("time + 0.1*mass").cost
+    assert isinstance(with_mass, WeightedSum)
+    hessian = with_mass.hessian(problem)
+    assert hessian is not None and hessian(y).shape == (y.size, y.size) and hessian(y).nnz == 0
+    assert parse_objective("time + 0.5*effort").cost.hessian(problem) is None  # effort's is SR1's
     assert parse_objective("time").cost is COSTS["time"]
+
+
+def test_catalogue_prices_read_from_the_file_make_the_price_cost(tmp_path):
+    text = (ROOT / "scenarios" / "catalogs" / "paper-4dof.yaml").read_text()
+    prices = {}
+
+    def priced(match):
+        prices[match.group(1)] = 100.0 + 7.0 * len(prices)
+        return f"{match.group(0)}\n    price: {prices[match.group(1)]}"
+
+    (tmp_path / "catalog.yaml").write_text(re.sub(r"- id: (\w+)", priced, text))
+    scenario_text = REACH.read_text().replace("catalog: catalogs/paper-4dof.yaml", "catalog: catalog.yaml")
+    (tmp_path / "scenario.yaml").write_text(scenario_text.replace("  cost: time", "  cost: time then price"))
+    scenario = load_scenario(tmp_path / "scenario.yaml")
+    name = "B-J1-L3-J1-L3-E2"
+    robot = robot_model(Composition.from_name(name, scenario.catalog), scenario.catalog, 1.0)
+    assert robot.design.price == pytest.approx(sum(prices[i] for i in name.split("-")), abs=1e-9)
+    assert len(prices) == len(scenario.catalog.modules)
+
+
+def test_the_ratio_rules_bound_clause_keeps_a_robot_within_a_wide_band():
+    view = RoundCosts(5, {}, {}, {"best": 1.0}, floors={"close": 1.6, "far": 2.1})
+    settings = PruningSettings(threshold=0.5)
+    assert set(ratio_rule(view, settings)) == {"close", "far"}
+    assert set(ratio_rule(view, settings, band=1.8)) == {"far"}  # 1.6 is within 80 % of the best
 
 
 # -- minimum energy -------------------------------------------------------------------------------
@@ -363,3 +397,43 @@ def test_the_best_first_search_certifies_the_exhaustive_winner_of_a_sum_and_an_o
         before = catalog_bound(composition, scenario.catalog, scenario.task, 1e-4).value
         assert before <= result.cost * (1 + 1e-9), (result.name, before, result.cost)
         assert before > 0.0 and result.cost_bound <= result.cost * (1 + 1e-9)
+
+
+def test_a_plan_longer_than_max_time_fails_verification_and_says_so():
+    scenario = _energy_scenario(max_time=3.0)
+    composition, verdict, problem = _energy_problem("base-PB21-L1-PB23-L5-L3", scenario)
+    result = make_candidate(scenario, CandidateSpec(composition, verdict.q_start, verdict.q_goal)).solve()
+    assert result.status == CandidateStatus.OPTIMAL and result.verification.duration_excess <= 1e-6
+    shorter = ShootingProblem(
+        problem.robot,
+        problem.q_start,
+        problem.q_goal,
+        problem.obstacles,
+        problem.objective,
+        problem.settings,
+        max_time=2.9,
+    )
+    checked = verify(shorter, result.y)  # the same plan, held to 2.9 s
+    assert checked.duration_excess == pytest.approx(3.0 / 2.9 - 1.0, rel=1e-6) and not checked.passed
+    assert replace(checked, duration_excess=0.0).passed
+    assert "the move takes 3.45% longer than task.max_time" in _verification_failure(checked)
+
+
+def test_the_energy_is_solved_rounder_first_then_at_its_own_rounding(monkeypatch):
+    stages = []
+    original = ShootingProblem.with_objective
+
+    def recording(self, cost):
+        stages.append(cost.smoothing)
+        return original(self, cost)
+
+    monkeypatch.setattr(ShootingProblem, "with_objective", recording)
+    scenario = _energy_scenario(max_time=3.0)
+    composition, verdict, _ = _energy_problem("base-PB21-L2-PB23-L6-L3", scenario)
+    candidate = make_candidate(scenario, CandidateSpec(composition, verdict.q_start, verdict.q_goal))
+    result = candidate.solve()
+    assert stages == [FIRST_SMOOTHING]
+    assert candidate.problem.objective.smoothing == POWER_SMOOTHING  # the problem it ended on
+    assert result.status == CandidateStatus.OPTIMAL and result.cost == pytest.approx(
+        candidate.problem.evaluate(result.y).cost * candidate.problem.cost_unit, rel=1e-9
+    )

@@ -56,7 +56,8 @@ class Objective:
             raise ValueError("expected at least one cost to minimise")
         names = [n for n, _ in self.terms]
         if len(set(names)) != len(names):
-            raise ValueError(f"a cost appears twice in the sum {names}")
+            twice = next(n for n in names if names.count(n) > 1)
+            raise ValueError(f"a cost appears twice in the sum: {shorten(twice)}")
         for name, weight in self.terms:
             if not (math.isfinite(weight) and weight > 0.0):
                 raise ValueError(f"the weight of {name!r} is {weight}; expected a positive number")
@@ -114,7 +115,8 @@ class Objective:
     def rank(self, items: Iterable[T], cost: Callable[[T], float], design: Callable[[T], Design], name=str) -> list[T]:
         """``items`` (verified results) best first: by the sum; with tie-breaks, those within the
         band of the best by the ``then`` costs of their design, in order, then by the sum; ties
-        by ``name``."""
+        by ``name``. Costs equal to 12 significant digits are equal (a cost of the design comes
+        back from the solver's scaling a rounding off its value)."""
         items = list(items)
         if not items:
             return []
@@ -122,14 +124,22 @@ class Objective:
         costs = _costs()
 
         def key(item: T) -> tuple:
-            c = cost(item)
-            if self.then and c <= best * self.band:
+            c = _rounded(cost(item))
+            if self.then and c <= best * self.band * (1.0 + EQUAL):
                 d = design(item)
                 tiebreak = tuple(costs[n].value(d) for n in self.then)  # type: ignore[attr-defined]
                 return (0, *tiebreak, c, name(item))
             return (1, c, name(item))
 
         return sorted(items, key=key)
+
+
+#: Costs closer than this share are equal when robots are ranked (rounding, not physics).
+EQUAL = 1e-12
+
+
+def _rounded(cost: float) -> float:
+    return float(f"{cost:.12g}")
 
 
 def parse_objective(text: str | Objective) -> Objective:
@@ -150,7 +160,7 @@ def parse_objective(text: str | Objective) -> Objective:
     rest, _, after = rest.partition(" then ")
     then = tuple(n.strip() for n in after.split(",")) if after else ()
     terms = []
-    for part in rest.split("+"):
+    for part in re.split(r"(?<![0-9.][eE])\+", rest):
         match = _TERM.match(part.strip())
         if not match:
             if re.fullmatch(r"[A-Za-z_]\w*", part.strip()):

@@ -214,8 +214,9 @@ class Candidate:
                 self._finish(CandidateStatus.OPTIMAL, outcome.reason + self._note, verification)
                 return
             crossing = _crossing(previous, verification)
-            if refined == self.max_refinements or (crossing and cold):
-                break
+            only_duration = not verification.duration_ok and replace(verification, duration_excess=0.0).passed
+            if refined == self.max_refinements or (crossing and cold) or only_duration:
+                break  # (more sub-steps cannot shorten the move)
             offset = final.iteration
             if crossing:  # the same sub-steps, from the first guess
                 cold, y0, verification = True, None, None
@@ -335,6 +336,8 @@ def _verification_failure(v: Verification) -> str:
         parts.append(f"clearance {v.min_clearance:.4f} m < 0 between sub-steps")
     if not v.orientation_ok:
         parts.append(f"the tool's orientation at an end is {v.orientation_excess:.3g} rad beyond its tolerance")
+    if not v.duration_ok:
+        parts.append(f"the move takes {v.duration_excess:.2%} longer than task.max_time")
     if not v.limits_ok:
         parts.append(
             f"limits exceeded (velocity x{v.velocity_ratio:.3f}, torque x{v.torque_ratio:.3f}, "
