@@ -210,15 +210,16 @@ def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolera
     For the task's objective, :func:`objective_bound` of that time (``none`` when it is 0)."""
     objective = task.cost
     time = 0.0
-    if "time" in dict(objective.terms):
+    if objective.counts_time:
         gap = (
             math.dist(task.start, task.goal) - (task.start_tolerance or tolerance) - (task.goal_tolerance or tolerance)
         )
         speed = tool_speed_limit(composition, catalog) * (1.0 + LIMIT_TOLERANCE)
         gap -= TERMINAL_TOLERANCE
         time = max(gap, 0.0) / speed if 0.0 < speed < math.inf else 0.0
-    by_design = any(isinstance(COSTS[name], DesignCost) for name, _ in objective.terms)
-    value = objective_bound(objective, time, design_of(composition.modules, catalog) if by_design else None)
+    value = objective_bound(
+        objective, time, design_of(composition.modules, catalog) if objective.counts_design else None
+    )
     if value <= 0.0:
         return CatalogBound("none", 0.0)
     return CatalogBound(TOOL_SPEED if time > 0.0 else DESIGN, value)

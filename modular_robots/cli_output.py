@@ -9,11 +9,10 @@ from pathlib import Path
 
 import click
 
-from .composition import Composition
-from .costs import COSTS, design_of
+from .costs import COSTS
 from .feasibility import TEST_NAMES, FeasibilitySummary, Verdict
 from .plan.boundary import BoundaryPair
-from .plan.document import RESULT, read_document
+from .plan.document import RESULT, read_document, result_design
 
 __all__ = [
     "LiveLine",
@@ -96,10 +95,8 @@ def _tie_break_row(result, scenario) -> list[tuple[str, str]]:
     best = min(c.cost for c in verified)
     tied = [c for c in verified if c.cost <= best * objective.band]
 
-    def design(c):
-        return design_of(Composition.from_name(c.composition or c.name, scenario.catalog).modules, scenario.catalog)
-
-    values = ", ".join(_with_unit(name, COSTS[name].value(design(result.winner))) for name in objective.then)  # type: ignore[attr-defined]
+    design = result_design(result.winner, scenario)
+    values = ", ".join(_with_unit(name, COSTS[name].value(design)) for name in objective.then)  # type: ignore[attr-defined]
     return [
         (
             "tie-break",

@@ -23,7 +23,6 @@ import numpy as np
 from .certificate import Certificate, Ledger
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
-from .costs import Design, design_of
 from .exceptions import CompositionError, InfeasibleError, Terminated, shorten
 from .execution import make_engine, make_executor, single_threaded_blas
 from .feasibility import (
@@ -40,7 +39,7 @@ from .ocp.ends import free_ends_bound, task_ends
 from .ocp.solver import ITERATION_LIMIT, Iterate
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
-from .plan.document import single_composition_counts, stage_counts, status_counts
+from .plan.document import result_design, single_composition_counts, stage_counts, status_counts
 from .plan.tracking import Tracking, track
 from .pruning import Progress, PruningManager
 from .recorder import RunRecorder
@@ -136,12 +135,6 @@ def ranked(results: Iterable[CandidateResult], scenario: Scenario) -> list[Candi
     tie band the costs of the design)."""
     optimal = [r for r in results if r.status == CandidateStatus.OPTIMAL]
     return scenario.task.cost.rank(optimal, lambda r: r.cost, lambda r: result_design(r, scenario), lambda r: r.name)
-
-
-def result_design(result: CandidateResult, scenario: Scenario) -> Design:
-    """The :class:`~modular_robots.costs.Design` of ``result``'s composition."""
-    modules = Composition.from_name(result.composition or result.name, scenario.catalog).modules
-    return design_of(modules, scenario.catalog)
 
 
 def _winner(results: Iterable[CandidateResult], scenario: Scenario) -> CandidateResult | None:

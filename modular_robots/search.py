@@ -346,11 +346,12 @@ class _Search:
         (:func:`~modular_robots.bounds.objective_bound`)."""
         objective, catalog = self.scenario.task.cost, self.scenario.catalog
         time = 0.0
-        if "time" in dict(objective.terms) and not self.scenario.optimizer.free_ends and verdict.time_bound is not None:
+        if objective.counts_time and not self.scenario.optimizer.free_ends and verdict.time_bound is not None:
             limits = [lever.velocity for lever in joint_levers(verdict.composition, catalog)]
             slowest = min((v for v in limits if 0.0 < v < math.inf), default=math.inf)
             time = max(verdict.time_bound - 2 * _CLUSTER / slowest, 0.0) / (1.0 + LIMIT_TOLERANCE)
-        return objective_bound(objective, time, design_of(verdict.composition.modules, catalog))
+        design = design_of(verdict.composition.modules, catalog) if objective.counts_design else None
+        return objective_bound(objective, time, design)
 
     # -- stage 3: step C ------------------------------------------------------------------------------
     def _optimise(self, items: list[_Item]) -> None:
@@ -399,7 +400,7 @@ class _Search:
     def _bound_name(self, kind: int) -> str:
         """The name the certificate gives a stage's bound (before step B without the time in the
         objective: the costs of the design alone)."""
-        if kind == _UNCHECKED and "time" not in dict(self.scenario.task.cost.terms):
+        if kind == _UNCHECKED and not self.scenario.task.cost.counts_time:
             return DESIGN
         return _BOUND_NAME[kind]
 

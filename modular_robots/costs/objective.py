@@ -20,6 +20,7 @@ import math
 import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TypeVar
 
 from ..exceptions import shorten
@@ -104,6 +105,17 @@ class Objective:
         if len(self.terms) == 1 and self.terms[0][1] == 1.0:
             return costs[self.terms[0][0]]
         return WeightedSum(tuple((costs[n], w) for n, w in self.terms), " + ".join(n for n, _ in self.terms))
+
+    @cached_property
+    def counts_time(self) -> bool:
+        """Whether the sum counts the time (its bound then counts the time's)."""
+        return any(name == "time" for name, _ in self.terms)
+
+    @cached_property
+    def counts_design(self) -> bool:
+        """Whether the sum counts a cost of the design (its bound then needs the robot's design)."""
+        costs = _costs()
+        return any(isinstance(costs[name], DesignCost) for name, _ in self.terms)
 
     @property
     def band(self) -> float:

@@ -54,6 +54,7 @@ __all__ = [
     "settings_json",
     "task_json",
     "candidate_json",
+    "result_design",
     "candidate_summary_json",
     "winner_json",
     "status_counts",
@@ -142,9 +143,15 @@ def candidate_json(r: CandidateResult, design: Design | None = None) -> dict:
     }
 
 
+def result_design(result: CandidateResult, scenario: Scenario) -> Design:
+    """The :class:`~modular_robots.costs.Design` of ``result``'s composition."""
+    modules = Composition.from_name(result.composition or result.name, scenario.catalog).modules
+    return design_of(modules, scenario.catalog)
+
+
 def _design(r: CandidateResult, scenario: Scenario) -> Design | None:
     try:
-        return design_of(Composition.from_name(r.composition or r.name, scenario.catalog).modules, scenario.catalog)
+        return result_design(r, scenario)
     except (InputError, ValueError):  # a name the catalogue does not know (an optimize run's own)
         return None
 
