@@ -252,6 +252,10 @@ class Fields:
     def has(self, key: str) -> bool:
         return key in self._data
 
+    def names(self) -> list[str]:
+        """The mapping's keys, as written."""
+        return [str(key) for key in self._data]
+
     def raw(self, key: str, default: Any = _MISSING) -> Any:
         self._read.add(key)
         if key not in self._data:

@@ -43,6 +43,7 @@ from .collision import CollisionModel
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InputError, shorten
 from .execution import Engine, make_engine
+from .goals import stops_of
 from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
 from .obstacles import obstacle_label
 from .orientation import Orientation
@@ -146,6 +147,9 @@ class Verdict:
     q_goal: tuple[float, ...] | None = None
     time_bound: float | None = None
     clear_pair: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    #: Among several goals, the configurations at the ends of the moves between the start and
+    #: the last (step C's first guess there; :func:`_boundary_chain`).
+    q_via: tuple[tuple[float, ...], ...] = ()
 
     @property
     def passed(self) -> bool:
@@ -168,6 +172,8 @@ class Verdict:
                 time_bound=self.time_bound,
                 clear_pair=[list(q) for q in self.clear_pair] if self.clear_pair else None,
             )
+            if self.q_via:
+                out["q_via"] = [list(q) for q in self.q_via]
         return out
 
 
@@ -296,7 +302,7 @@ def check_compositions(
     verdicts = []
     for cascade in cascades:
         if cascade.verdict is None:
-            cascade.verdict = _feasible(cascade) if settings.collision else _relaxed(cascade)
+            cascade.verdict = _feasible(cascade, task) if settings.collision else _relaxed(cascade, task)
         verdicts.append(cascade.verdict)
     return verdicts
 
@@ -330,23 +336,28 @@ class _Cascade:
 class _End(NamedTuple):
     """What step B asks of the tool at one end: its ``position`` [m], the ``orientation`` (None:
     free), the position ``tolerance`` [m] of IK and the workspace test, and the ``slack`` [m] the
-    task allows the reach test (its own position tolerance; 0 when it gives none)."""
+    task allows the reach test (its own position tolerance; 0 when it gives none), and whether the
+    robot is at ``rest`` there (an ``at`` goal is passed moving: no static torque test)."""
 
     position: np.ndarray
     orientation: Orientation | None
     tolerance: float
     slack: float
+    rest: bool = True
 
 
 def _ends(task: Task, settings: FeasibilitySettings) -> dict[str, _End]:
-    """The task's start and goal, by label, with the task's tolerances or else the settings'."""
-    ends = {
-        "start": (task.start, task.start_orientation, task.start_tolerance),
-        "goal": (task.goal, task.goal_orientation, task.goal_tolerance),
-    }
+    """The task's start and goals, by label (:attr:`~modular_robots.scenario.Task.targets`), with
+    the task's tolerances or else the settings'."""
     return {
-        label: _End(np.asarray(position, dtype=float), orientation, tolerance or settings.tolerance, tolerance or 0.0)
-        for label, (position, orientation, tolerance) in ends.items()
+        label: _End(
+            np.asarray(goal.position, dtype=float),
+            goal.orientation,
+            goal.tolerance or settings.tolerance,
+            goal.tolerance or 0.0,
+            goal.kind != "at",
+        )
+        for label, goal in task.targets
     }
 
 
@@ -501,14 +512,19 @@ def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
     cascade.passing[label] = outcome.kept
 
 
-def _feasible(cascade: _Cascade) -> Verdict:
+def _feasible(cascade: _Cascade, task: Task) -> Verdict:
     """The verdict of a composition that passes every test at every target, with its boundary
     configurations."""
     built = cascade.built()
     robot, collision, figures = built.robot, built.collision(), cascade.figures
-    (q_start, q_goal), clear = _boundary_pair(robot, collision, cascade.passing["start"], cascade.passing["goal"])
+    if task.goals:
+        chain = _boundary_chain(robot, task, cascade.passing)
+        (q_start, q_goal), clear = (chain[0], chain[-1]), None
+    else:
+        (q_start, q_goal), clear = _boundary_pair(robot, collision, cascade.passing["start"], cascade.passing["goal"])
+        chain = [q_start, q_goal]
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
-    figures["clearance"] = min(collision.min_distance(q) for q in (q_start, q_goal))
+    figures["clearance"] = min(collision.min_distance(q) for q in chain)
     return Verdict(
         cascade.composition,
         None,
@@ -519,20 +535,27 @@ def _feasible(cascade: _Cascade) -> Verdict:
         tuple(map(float, q_goal)),
         robot.travel_time_bound(q_start, q_goal),
         (tuple(map(float, clear[0])), tuple(map(float, clear[1]))) if clear else None,
+        tuple(tuple(map(float, q)) for q in chain[1:-1]),
     )
 
 
-def _relaxed(cascade: _Cascade) -> Verdict:
+def _relaxed(cascade: _Cascade, task: Task) -> Verdict:
     """The verdict of a composition that passes the relaxed cascade: the fastest pair of its
-    solutions, no clear pair (nothing was measured against the obstacles)."""
+    solutions (of the chain, among several goals), no clear pair (nothing was measured against
+    the obstacles)."""
     robot = cascade.built().robot
-    starts, goals = np.array(cascade.passing["start"]), np.array(cascade.passing["goal"])
-    velocity = robot.velocity_limit
-    limited = np.isfinite(velocity) & (velocity > 0)
-    moves = np.abs(goals[None, :, limited] - starts[:, None, limited]) / velocity[limited]  # (start, goal, joint)
-    times = np.max(moves, axis=2, initial=0.0)
-    first = int(np.argmin(times))  # the first pair of least time, as min() over the pairs in order
-    q_start, q_goal = starts[first // len(goals)], goals[first % len(goals)]
+    if task.goals:
+        chain = _boundary_chain(robot, task, cascade.passing)
+        q_start, q_goal = chain[0], chain[-1]
+    else:
+        starts, goals = np.array(cascade.passing["start"]), np.array(cascade.passing["goal"])
+        velocity = robot.velocity_limit
+        limited = np.isfinite(velocity) & (velocity > 0)
+        moves = np.abs(goals[None, :, limited] - starts[:, None, limited]) / velocity[limited]  # (start, goal, joint)
+        times = np.max(moves, axis=2, initial=0.0)
+        first = int(np.argmin(times))  # the first pair of least time, as min() over the pairs in order
+        q_start, q_goal = starts[first // len(goals)], goals[first % len(goals)]
+        chain = [q_start, q_goal]
     return Verdict(
         cascade.composition,
         None,
@@ -542,7 +565,37 @@ def _relaxed(cascade: _Cascade) -> Verdict:
         tuple(map(float, q_start)),
         tuple(map(float, q_goal)),
         robot.travel_time_bound(q_start, q_goal),
+        None,
+        tuple(tuple(map(float, q)) for q in chain[1:-1]),
     )
+
+
+def _boundary_chain(robot: RobotModel, task: Task, passing: dict[str, list[np.ndarray]]) -> list[np.ndarray]:
+    """The configurations of a task of several goals at its start and at the end of each move
+    (:func:`~modular_robots.goals.stops_of`): among the passing solutions at each pose, the chain
+    of least summed ``max_i |dq_i| / qdot_max,i`` over the moves between poses (dynamic
+    programming), a return taking the configuration it returns to. Step C starts from it; the
+    configurations of the goals between the start and the end are free there."""
+    labels = [label for label, _ in task.targets]
+    options = [np.asarray(passing[label]) for label in labels]
+    # Least total time to each option of pose k, and the option of pose k - 1 it came from.
+    best, back = np.zeros(len(options[0])), []
+    for before, after in itertools.pairwise(options):
+        legs = np.array([[robot.travel_time_bound(a, b) for b in after] for a in before])
+        total = best[:, None] + legs
+        back.append(np.argmin(total, axis=0))
+        best = total.min(axis=0)
+    pick = [int(np.argmin(best))]
+    for came_from in reversed(back):
+        pick.append(int(came_from[pick[-1]]))
+    chosen = [options[k][i] for k, i in enumerate(reversed(pick))]
+    _, stops = stops_of(task.goals)
+    posed = [i for i, goal in enumerate(task.goals) if goal.position is not None]
+    pose_of = {goal_index: k for k, goal_index in enumerate(posed)}
+    chain = [chosen[0]]
+    for stop in stops:
+        chain.append(chain[stop.returns_to] if stop.returns_to is not None else chosen[1 + pose_of[stop.goal]])
+    return chain
 
 
 @dataclass
@@ -580,13 +633,16 @@ def _tests(
         outcome.angle = min(outcome.angle, nearest.angle)
         outcome.orientation = end.orientation
     for q in solutions[len(known) :]:
-        t0 = time.perf_counter()
-        torque = _torque_check(robot, q, label)
-        clock.time(STATIC_TORQUE.name, t0)
-        outcome.best_ratio = min(outcome.best_ratio, torque.figure)
-        if not torque.passed:
-            outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
-            continue
+        if end.rest:
+            t0 = time.perf_counter()
+            torque = _torque_check(robot, q, label)
+            clock.time(STATIC_TORQUE.name, t0)
+            outcome.best_ratio = min(outcome.best_ratio, torque.figure)
+            if not torque.passed:
+                outcome.closest = _closer(outcome.closest, (0, -torque.figure, torque.message))
+                continue
+        else:
+            outcome.best_ratio = 0.0
         if collision:
             t0 = time.perf_counter()
             clear = _collision_check(built.collision(), q, label)

@@ -35,7 +35,8 @@ from .feasibility import (
     filter_compositions,
 )
 from .ocp.candidate import CandidateSpec, make_candidate
-from .ocp.ends import free_ends_bound, task_ends
+from .ocp.ends import task_ends
+from .ocp.route import route_cost_bound, task_route
 from .ocp.solver import ITERATION_LIMIT, Iterate
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
@@ -109,7 +110,7 @@ def candidate_specs(survivors: Iterable[Verdict]) -> Iterator[CandidateSpec]:
     :func:`~modular_robots.ocp.candidate.make_candidate`)."""
     for verdict in survivors:
         assert verdict.q_start is not None and verdict.q_goal is not None  # a survivor has its boundary pair
-        yield CandidateSpec(verdict.composition, verdict.q_start, verdict.q_goal, BoundaryPair.FASTEST)
+        yield CandidateSpec(verdict.composition, verdict.q_start, verdict.q_goal, BoundaryPair.FASTEST, verdict.q_via)
         if verdict.clear_pair is not None:
             yield CandidateSpec(verdict.composition, *verdict.clear_pair, BoundaryPair.CLEAR)
 
@@ -119,14 +120,14 @@ def cost_bound(scenario: Scenario, spec: CandidateSpec) -> float:
     have (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`): the task's cost's
     :meth:`~modular_robots.costs.Cost.lower_bound` at the plan's velocity bounds."""
     cost = scenario.task.cost.cost
-    if not cost.bounded:
+    if not cost.bounded:  # (no time: the pauses add nothing)
         return 0.0
+    route = task_route(scenario.task, spec.q_via)
     robot = robot_model(spec.composition, scenario.catalog, scenario.task.payload)
     velocity_bound = scenario.optimizer.velocity_margin * robot.velocity_limit
-    if scenario.optimizer.free_ends:
-        return free_ends_bound(cost, robot, task_ends(scenario.task), velocity_bound)
+    free_ends = task_ends(scenario.task) if scenario.optimizer.free_ends else None
     q_start, q_goal = np.asarray(spec.q_start, dtype=float), np.asarray(spec.q_goal, dtype=float)
-    return cost.lower_bound(robot, q_start, q_goal, velocity_bound)
+    return route_cost_bound(cost, robot, q_start, q_goal, velocity_bound, free_ends, route)
 
 
 def ranked(results: Iterable[CandidateResult], scenario: Scenario) -> list[CandidateResult]:

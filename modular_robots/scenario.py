@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -12,6 +13,7 @@ from .catalog import Catalog, catalog_from_fields, load_catalog
 from .costs import COSTS, DEFAULT_WITHIN, Objective, parse_objective
 from .exceptions import InputError, ScenarioError, shorten
 from .execution import CONNECT_TIMEOUT, ENGINES, ExecutionSettings, address_problem
+from .goals import GOAL_KINDS, START, Goal
 from .obstacles import FloorObstacle, Obstacle, SphereObstacle, obstacle_from_fields
 from .orientation import DEFAULT_ANGLE_TOLERANCE, Orientation
 
@@ -58,7 +60,12 @@ class Task:
 
     At each end the tool may also be asked an orientation (``start_orientation``,
     ``goal_orientation``; None: free) and a position tolerance [m] (``start_tolerance``,
-    ``goal_tolerance``; None: step B's IK tolerance)."""
+    ``goal_tolerance``; None: step B's IK tolerance).
+
+    A task of several moves lists its ``goals`` (:mod:`~modular_robots.goals`) after the start;
+    ``goal`` and its orientation and tolerance are then those of the last goal that moves (of the
+    goal it returns to, for a return). Without ``goals``, the task is the one move from ``start``
+    to ``goal``, at rest at both ends."""
 
     payload: float
     start: tuple[float, float, float]
@@ -76,9 +83,26 @@ class Task:
     #: The longest the move may take [s] (None: no limit). A task that minimises energy alone
     #: needs one: a slower move always needs less (the drives hold the payload without work).
     max_time: float | None = None
+    goals: tuple[Goal, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "cost", parse_objective(self.cost))  # a descriptor string is welcome
+
+    @property
+    def route(self) -> tuple[Goal, ...]:
+        """The task's goals after the start: ``goals``, or the one ``reach`` of ``goal``."""
+        return self.goals or (Goal("reach", "1", self.goal, self.goal_orientation, self.goal_tolerance),)
+
+    @property
+    def targets(self) -> tuple[tuple[str, Goal], ...]:
+        """Every tolerated pose the tool must meet, labelled for messages (``start``, ``goal``, or
+        ``goal 2`` among several goals): the start as a ``reach`` goal, then each ``at`` and
+        ``reach`` goal in order."""
+        start = Goal("reach", START, self.start, self.start_orientation, self.start_tolerance)
+        poses = [g for g in self.route if g.position is not None]
+        if len(poses) == 1:
+            return (("start", start), ("goal", poses[0]))
+        return (("start", start), *((f"goal {g.id}", g) for g in poses))
 
     @property
     def collision_obstacles(self) -> tuple[Obstacle, ...]:
@@ -218,13 +242,27 @@ def _below(value: float, limit: float) -> str:
 def _read_task(f: Fields) -> Task:
     payload = f.number("payload", minimum=0.0)
     start, start_orientation, start_tolerance = _read_end(f, "start")
-    goal, goal_orientation, goal_tolerance = _read_end(f, "goal")
-    f.check(
-        "goal",
-        math.dist(start, goal) >= MIN_TRAVEL * (1.0 - 1e-9),  # 1 mm as decimals write it: 1.101 - 1.1 < 1e-3
-        f"the goal is {_below(math.dist(start, goal) * 1000, MIN_TRAVEL * 1000)} mm from the start; expected at least "
-        f"{MIN_TRAVEL * 1000:g} mm (a task moves the payload)",
-    )
+    goals: tuple[Goal, ...] = ()
+    if f.has("goals"):
+        if f.has("goal"):
+            raise f.fail("goal", "give goal (one move) or goals (several), not both")
+        goals = _read_goals(f, start)
+        final = _final_pose(goals)
+        if final is None:  # back to the start
+            goal, goal_orientation, goal_tolerance = start, start_orientation, start_tolerance
+        else:
+            assert final.position is not None  # an at or reach goal
+            goal, goal_orientation, goal_tolerance = final.position, final.orientation, final.tolerance
+        points = [("start", start)] + [(f"goal {g.id}", g.position) for g in goals if g.position is not None]
+    else:
+        goal, goal_orientation, goal_tolerance = _read_end(f, "goal")
+        f.check(
+            "goal",
+            math.dist(start, goal) >= MIN_TRAVEL * (1.0 - 1e-9),  # 1 mm as decimals write it: 1.101 - 1.1 < 1e-3
+            f"the goal is {_below(math.dist(start, goal) * 1000, MIN_TRAVEL * 1000)} mm from the start; expected at "
+            f"least {MIN_TRAVEL * 1000:g} mm (a task moves the payload)",
+        )
+        points = [("start", start), ("goal", goal)]
     obstacles = []
     for item in f.mappings("obstacles", default=()):
         obstacle = obstacle_from_fields(item)
@@ -233,11 +271,11 @@ def _read_task(f: Fields) -> Task:
                 obstacle.kind,
                 f"the obstacle contains the robot's base at the origin ({obstacle.describe()})",
             )
-        for label, point in (("start", start), ("goal", goal)):
+        for label, point in points:
             if obstacle.contains(point):
                 raise item.fail(obstacle.kind, f"the obstacle contains the {label} position {list(point)}")
         obstacles.append(obstacle)
-    floor = _read_floor(f, start, goal)
+    floor = _read_floor(f, points)
     cost = _read_cost(f)
     max_time = f.number("max_time", default=None, exclusive_minimum=0.0, maximum=MAX_TIME)
     if max_time is None and _crawls(cost):
@@ -246,6 +284,12 @@ def _read_task(f: Fields) -> Task:
             f"{cost} has no minimum over the move's duration: a slower move always costs less (the drives hold "
             "the payload without doing work), and step C would crawl toward an ever longer move; add "
             "task.max_time [s], or add the time to the sum (e.g. time + 0.01*energy)",
+        )
+    if any(g.kind == "pause" for g in goals) and any(name == "effort" for name, _ in cost.terms):
+        raise f.fail(
+            "cost",
+            "the effort of a task with a pause is not supported: holding the payload still costs effort that step C "
+            "does not count; minimise the time or the energy (a pause does no work), or drop the pause",
         )
     self_collision = f.boolean("self_collision", default=True)
     f.done()
@@ -262,7 +306,70 @@ def _read_task(f: Fields) -> Task:
         start_tolerance,
         goal_tolerance,
         max_time,
+        goals,
     )
+
+
+def _read_goals(f: Fields, start: tuple[float, float, float]) -> tuple[Goal, ...]:
+    """``task.goals``: a list of one-key mappings, ``at`` or ``reach`` (a pose, as ``task.goal``),
+    ``pause`` (a duration [s]) or ``return`` (``start`` or an earlier goal's id), each with an
+    optional ``id`` (default: its position in the list, from 1)."""
+    goals: list[Goal] = []
+    previous: tuple[float, ...] = start
+    poses: dict[str, tuple[float, ...]] = {START: start}
+    items = list(f.mappings("goals"))
+    f.check("goals", bool(items), "expected at least one goal")
+    for number, item in enumerate(items, start=1):
+        kinds = [k for k in GOAL_KINDS if item.has(k)]
+        if len(kinds) != 1:
+            unknown = [k for k in item.names() if k != "id"]
+            raise item.fail(
+                unknown[0] if len(unknown) == 1 else None,
+                f"expected exactly one of {', '.join(GOAL_KINDS)} (and an optional id), got "
+                f"{', '.join(map(shorten, unknown)) or 'none'}",
+            )
+        kind = kinds[0]
+        id_ = str(item.raw("id", str(number)))
+        item.check("id", id_ not in poses and all(g.id != id_ for g in goals), f"goal id {shorten(id_)} is used twice")
+        if kind == "pause":
+            duration = item.number("pause", exclusive_minimum=0.0, maximum=MAX_TIME)
+            goals.append(Goal("pause", id_, duration=duration))
+        elif kind == "return":
+            to = str(item.raw("return"))
+            item.check(
+                "return",
+                to in poses,
+                f"no earlier goal with id {shorten(to)} to return to; expected start or one of "
+                f"{', '.join(k for k in poses if k != START) or 'none (no goal before it)'}",
+            )
+            goals.append(Goal("return", id_, to=to))
+            position = poses[to]
+        else:
+            position, orientation, tolerance = _read_end(item, kind)
+            goals.append(Goal(kind, id_, position, orientation, tolerance))
+        if kind != "pause":
+            item.check(
+                kind,
+                math.dist(previous, position) >= MIN_TRAVEL * (1.0 - 1e-9),
+                f"the goal is {_below(math.dist(previous, position) * 1000, MIN_TRAVEL * 1000)} mm from the one "
+                f"before; expected at least {MIN_TRAVEL * 1000:g} mm (a move moves the payload)",
+            )
+            previous = poses[id_] = position
+        item.done()
+    f.check("goals", any(g.moves for g in goals), "expected at least one goal that moves (at, reach or return)")
+    return tuple(goals)
+
+
+def _final_pose(goals: tuple[Goal, ...]) -> Goal | None:
+    """The pose goal where the motion ends: the last goal that moves, or the one it returns to
+    (None: the start)."""
+    by_id = {g.id: g for g in goals}
+    last = [g for g in goals if g.moves][-1]
+    while last.kind == "return":
+        if last.to == START:
+            return None
+        last = by_id[str(last.to)]
+    return last
 
 
 #: The longest move a task may allow [s].
@@ -345,13 +452,13 @@ def _read_end(f: Fields, key: str) -> tuple[tuple[float, float, float], Orientat
     return position, orientation, position_tolerance
 
 
-def _read_floor(f: Fields, start: tuple[float, ...], goal: tuple[float, ...]) -> float | None:
+def _read_floor(f: Fields, points: Sequence[tuple[str, tuple[float, ...]]]) -> float | None:
     """``task.floor``: a height [m] (default 0, the base's mounting plane) or ``none``."""
     value = f.raw("floor", 0.0)
     if value is None or value == "none":
         return None
     height = f.number("floor", default=0.0, maximum=MAX_FLOOR)
-    for label, point in (("start", start), ("goal", goal)):
+    for label, point in points:
         f.check(
             "floor",
             point[2] > height,

@@ -62,6 +62,7 @@ def verdict_from_json(document: dict, composition: Composition) -> Verdict:
         _tuple(document.get("q_goal")),
         document.get("time_bound"),
         (_floats(clear[0]), _floats(clear[1])) if clear else None,
+        tuple(_floats(q) for q in document.get("q_via", ())),
     )
 
 

@@ -134,6 +134,7 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
         ],
         "start": list(task.start) if task.start is not None else None,
         "goal": list(task.goal) if task.goal is not None else None,
+        "waypoints": [list(p) for p in task.waypoints],
     }
 
 
@@ -242,7 +243,8 @@ def _legend() -> str:
     )
     return (
         f"{swatches}; <span style='color:#d9534f'>&#9679;</span> obstacles (mesh: the clearance margin), "
-        "<span style='color:#16a34a'>&#9679;</span> start, <span style='color:#222'>&#9679;</span> goal, "
+        "<span style='color:#16a34a'>&#9679;</span> start, <span style='color:#2563eb'>&#9679;</span> goals on the "
+        "way, <span style='color:#222'>&#9679;</span> goal, "
         "line: the tool's path"
     )
 

@@ -46,11 +46,15 @@ class Design:
 class Problem(Protocol):
     """What a cost reads of the shooting problem (:class:`~modular_robots.ocp.ShootingProblem`).
 
-    Variables are scaled: the first is ``tf / tf_guess``; a cost's value is in units of
-    ``tf_guess`` seconds (its value in SI is the scaled value times ``tf_guess``).
+    Variables are scaled; a cost's value is in units of ``tf_guess`` seconds (its value in SI is
+    the scaled value times ``tf_guess``). A motion through several goals has phases, each of
+    ``phase_intervals`` intervals and its own duration (a single move is one phase); the robot
+    also stands still for ``hold`` seconds in pauses.
     """
 
     intervals: int
+    phase_intervals: int
+    hold: float
     substeps: int
     n_variables: int
     tf_guess: float
@@ -62,7 +66,7 @@ class Problem(Protocol):
     @property
     def interval_columns(self) -> np.ndarray:
         """``(N, p)``: the scaled variable of each of interval ``m``'s parameters ``(s_m, u_m,
-        tf)``, -1 where the parameter is fixed (the start state)."""
+        tf)`` (``tf`` its phase's duration), -1 where the parameter is fixed (the start state)."""
         ...
 
 
@@ -118,9 +122,10 @@ class Cost(Protocol):
         candidate whose bound exceeds a verified cost. 0 where no better bound is known."""
         ...
 
-    def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
-        """The scaled cost of a motion of duration ``tf`` [s] and, if ``derivatives``, its gradient
-        ``(n_variables,)`` with respect to the scaled variables."""
+    def evaluate(self, problem: Problem, tf: np.ndarray, motion: Motion, derivatives: bool) -> Evaluated:
+        """The scaled cost of a motion whose interval ``m`` lasts ``tf[m] / phase_intervals``
+        [s] (``tf`` ``(N,)``, each interval's phase's duration) and, if ``derivatives``, its
+        gradient ``(n_variables,)`` with respect to the scaled variables."""
         ...
 
     def hessian(self, problem: Problem) -> Callable[[np.ndarray], sparse.csr_matrix] | None:
@@ -137,9 +142,10 @@ def continuation(cost: Cost) -> tuple[Cost, ...]:
 
 def trapezoid_weights(problem: Problem) -> np.ndarray:
     """``(S + 1,)``: the trapezoid rule's weights of an interval's sub-step points, in normalised
-    time (a point's ``dt`` is ``tf`` times its weight; they sum to ``1 / N``)."""
-    N, S = problem.intervals, problem.substeps
-    weights = np.full(S + 1, 1.0 / (N * S))
+    time (a point's ``dt`` is its phase's duration times its weight; they sum to ``1 /
+    phase_intervals``)."""
+    M, S = problem.phase_intervals, problem.substeps
+    weights = np.full(S + 1, 1.0 / (M * S))
     weights[[0, -1]] *= 0.5
     return weights
 

@@ -60,7 +60,7 @@ class DesignCost:
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
         return self.value(robot.design)
 
-    def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
+    def evaluate(self, problem: Problem, tf: np.ndarray, motion: Motion, derivatives: bool) -> Evaluated:
         grad = np.zeros(problem.n_variables) if derivatives else None
         return self.value(problem.design) / problem.tf_guess, grad
 

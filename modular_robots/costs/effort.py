@@ -24,15 +24,15 @@ class Effort:
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
         return 0.0
 
-    def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
+    def evaluate(self, problem: Problem, tf: np.ndarray, motion: Motion, derivatives: bool) -> Evaluated:
         weights = trapezoid_weights(problem)
         ratio = motion.torques / problem.tau_scale
         per_interval = np.einsum("j,mjk->m", weights, ratio**2)
-        cost = tf * per_interval.sum() / problem.tf_guess
+        cost = float(tf @ per_interval) / problem.tf_guess
         if not derivatives:
             return cost, None
         assert motion.torque_sens is not None, "the motion was propagated without sensitivities"
-        local = 2.0 * tf * np.einsum("j,mjk,mjkp->mp", weights, ratio / problem.tau_scale, motion.torque_sens)
+        local = 2.0 * tf[:, None] * np.einsum("j,mjk,mjkp->mp", weights, ratio / problem.tau_scale, motion.torque_sens)
         local[:, -1] += per_interval
         return cost, interval_gradient(problem, local)
 

@@ -51,7 +51,7 @@ class Energy:
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
         return 0.0
 
-    def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
+    def evaluate(self, problem: Problem, tf: np.ndarray, motion: Motion, derivatives: bool) -> Evaluated:
         nv = motion.torques.shape[-1]
         weights = trapezoid_weights(problem)
         velocity = motion.states[..., nv:]
@@ -59,7 +59,7 @@ class Energy:
         d = self.smoothing
         root = np.sqrt(power * power + d * d)
         per_interval = (root - d) @ weights
-        cost = tf * per_interval.sum() / problem.tf_guess
+        cost = float(tf @ per_interval) / problem.tf_guess
         if not derivatives:
             return cost, None
         assert motion.torque_sens is not None and motion.state_sens is not None, "propagated without sensitivities"
@@ -67,7 +67,7 @@ class Energy:
         d_power = np.einsum("mjk,mjkp->mjp", velocity, motion.torque_sens) + np.einsum(
             "mjk,mjkp->mjp", motion.torques, motion.state_sens[:, :, nv:]
         )
-        local = tf * np.einsum("j,mj,mjp->mp", weights, slope, d_power)
+        local = tf[:, None] * np.einsum("j,mj,mjp->mp", weights, slope, d_power)
         local[:, -1] += per_interval
         return cost, interval_gradient(problem, local)
 

@@ -38,7 +38,7 @@ class WeightedSum:
     def lower_bound(self, robot: Bounds, q_start: np.ndarray, q_goal: np.ndarray, velocity_bound: np.ndarray) -> float:
         return sum(w * c.lower_bound(robot, q_start, q_goal, velocity_bound) for c, w in self.terms)
 
-    def evaluate(self, problem: Problem, tf: float, motion: Motion, derivatives: bool) -> Evaluated:
+    def evaluate(self, problem: Problem, tf: np.ndarray, motion: Motion, derivatives: bool) -> Evaluated:
         total, grad = 0.0, np.zeros(problem.n_variables) if derivatives else None
         for cost, weight in self.terms:
             value, g = cost.evaluate(problem, tf, motion, derivatives)

@@ -28,6 +28,7 @@ from ..robot import robot_model
 from ..scenario import OptimizerSettings, Scenario, Task
 from .ends import task_ends
 from .guess import swing_path
+from .route import task_route
 from .shooting import ShootingProblem
 from .solver import Iterate, SolverOutcome
 from .solvers import make_solver
@@ -54,6 +55,8 @@ class CandidateSpec:
     q_start: tuple[float, ...]
     q_goal: tuple[float, ...]
     boundary_pair: BoundaryPair = BoundaryPair.FASTEST
+    #: Among several goals, step B's configurations at the vias (:class:`~modular_robots.ocp.route.Via`).
+    q_via: tuple[tuple[float, ...], ...] = ()
 
     @property
     def name(self) -> str:
@@ -193,7 +196,7 @@ class Candidate:
             outcome = yield from self._solve_restarting(self.problem, y0, offset, refined)
             swung = (
                 swing_path(self.problem.robot, self.problem.collision, self.problem.waypoints)
-                if (outcome.status != "optimal" and attempt == 0 and self.swing)
+                if (outcome.status != "optimal" and attempt == 0 and self.swing and self.problem.phases == 1)
                 else None
             )
             if swung is not None:
@@ -288,6 +291,7 @@ class Candidate:
             boundary_pair=self.boundary_pair,
             q_start=tuple(float(v) for v in ends[0]),
             q_goal=tuple(float(v) for v in ends[-1]),
+            stop_times=tuple(map(float, problem.stop_times(last.y))) if last and problem.phases > 1 else (),
             y=last.y if last else None,
             waypoints=problem.waypoints,
             trajectory=trajectory,
@@ -338,6 +342,8 @@ def _verification_failure(v: Verification) -> str:
         parts.append(f"the tool's orientation at an end is {v.orientation_excess:.3g} rad beyond its tolerance")
     if not v.duration_ok:
         parts.append(f"the move takes {v.duration_excess:.2%} longer than task.max_time")
+    if not v.goals_ok:
+        parts.append(f"a goal between the start and the end is missed by {v.goal_excess:.3g} (m, rad/s or rad)")
     if not v.limits_ok:
         parts.append(
             f"limits exceeded (velocity x{v.velocity_ratio:.3f}, torque x{v.torque_ratio:.3f}, "
@@ -353,9 +359,11 @@ def composition_problem(
     q_start: Sequence[float],
     q_goal: Sequence[float],
     settings: OptimizerSettings = OptimizerSettings(),
+    q_via: tuple[tuple[float, ...], ...] = (),
 ) -> ShootingProblem:
     """The shooting problem of ``composition`` for ``task``, from rest at ``q_start`` to rest at
-    ``q_goal`` (step B's boundary configurations, :class:`CandidateSpec`)."""
+    ``q_goal`` through the task's goals, if several, from ``q_via`` (step B's configurations,
+    :class:`CandidateSpec`)."""
     robot = robot_model(composition, catalog, task.payload)
     return ShootingProblem(
         robot,
@@ -368,6 +376,7 @@ def composition_problem(
         orientations=(task.start_orientation, task.goal_orientation),
         free_ends=task_ends(task) if settings.free_ends else None,
         max_time=task.max_time,
+        route=task_route(task, q_via),
     )
 
 
@@ -384,6 +393,6 @@ def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:
     both is optimised from both, as two candidates (``docs/known-limits.md``).
     """
     problem = composition_problem(
-        spec.composition, scenario.catalog, scenario.task, spec.q_start, spec.q_goal, scenario.optimizer
+        spec.composition, scenario.catalog, scenario.task, spec.q_start, spec.q_goal, scenario.optimizer, spec.q_via
     )
     return Candidate(problem, spec.name, composition=spec.composition.name, boundary_pair=spec.boundary_pair)

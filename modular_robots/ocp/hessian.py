@@ -26,7 +26,7 @@ RNEA_STEP = 1e-5
 
 
 def kinematic_hessians(
-    fractions: np.ndarray, tf: float, u: np.ndarray, weight_q: np.ndarray, weight_v: np.ndarray
+    fractions: np.ndarray, tf: float | np.ndarray, u: np.ndarray, weight_q: np.ndarray, weight_v: np.ndarray
 ) -> np.ndarray:
     """``sum_j weight_q[j] . d2 q_j / dp2 + weight_v[j] . d2 v_j / dp2`` per interval.
 
@@ -35,7 +35,7 @@ def kinematic_hessians(
     fractions
         ``f_j = s_j / tf`` of the sub-steps ``(J,)``.
     tf
-        Final time [s].
+        Final time [s], or each interval's ``(N,)`` (its phase's duration).
     u
         Controls (accelerations) ``(N, nv)``.
     weight_q, weight_v
@@ -49,8 +49,9 @@ def kinematic_hessians(
     P = 3 * nv + 1
     H = np.zeros((N, P, P))
     f = np.asarray(fractions, dtype=float)
+    tfs = np.broadcast_to(np.asarray(tf, dtype=float), (N,))
     v0_tf = np.einsum("j,mjk->mk", f, weight_q)  # d2 q_j / dv0 dtf = f_j
-    u_tf = np.einsum("j,mjk->mk", tf * f**2, weight_q) + np.einsum("j,mjk->mk", f, weight_v)
+    u_tf = np.einsum("m,j,mjk->mk", tfs, f**2, weight_q) + np.einsum("j,mjk->mk", f, weight_v)
     tf_tf = np.einsum("j,mjk,mk->m", f**2, weight_q, u)  # d2 q_j / dtf2 = u f_j^2
     for block, values in ((1, v0_tf), (2, u_tf)):
         cols = block * nv + np.arange(nv)
@@ -99,7 +100,7 @@ def rnea_curvature(
 
 def torque_hessians(
     fractions: np.ndarray,
-    tf: float,
+    tf: float | np.ndarray,
     u: np.ndarray,
     velocities: np.ndarray,
     curvature: tuple[np.ndarray, ...],
@@ -115,16 +116,16 @@ def torque_hessians(
     J = len(fractions)
     P = 3 * nv + 1
     f = np.asarray(fractions, dtype=float)
-    s = tf * f
+    s = np.broadcast_to(np.asarray(tf, dtype=float), (N,))[:, None] * f  # (N, J)
     eye = np.eye(nv)
     Jq = np.zeros((N, J, nv, P))
     Jq[:, :, :, :nv] = eye
-    Jq[:, :, :, nv : 2 * nv] = s[None, :, None, None] * eye
-    Jq[:, :, :, 2 * nv : 3 * nv] = 0.5 * (s**2)[None, :, None, None] * eye
+    Jq[:, :, :, nv : 2 * nv] = s[:, :, None, None] * eye
+    Jq[:, :, :, 2 * nv : 3 * nv] = 0.5 * (s**2)[:, :, None, None] * eye
     Jq[:, :, :, -1] = velocities * f[None, :, None]
     Jv = np.zeros((N, J, nv, P))
     Jv[:, :, :, nv : 2 * nv] = eye
-    Jv[:, :, :, 2 * nv : 3 * nv] = s[None, :, None, None] * eye
+    Jv[:, :, :, 2 * nv : 3 * nv] = s[:, :, None, None] * eye
     Jv[:, :, :, -1] = u[:, None, :] * f[None, :, None]
     qq, vv, qv, qa = (c.reshape(N, J, nv, nv) for c in curvature[:4])
     H = np.einsum("mjap,mjab,mjbr->mpr", Jq, qq, Jq)

@@ -31,6 +31,7 @@ The problem is a plain object: it evaluates cost, constraints and their derivati
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -46,9 +47,10 @@ from ..orientation import Orientation
 from ..robot import RobotModel
 from ..scenario import OptimizerSettings
 from ..self_collision import SelfCollisionModel
-from .ends import ToolEnd, end_rows, free_ends_bound
+from .ends import ToolEnd, end_rows
 from .guess import detour_path, path_times
 from .hessian import kinematic_hessians, rnea_curvature, torque_hessians
+from .route import NO_ROUTE, Route, route_cost_bound
 from .transcription import Propagation, positive_or_one, transcription
 
 __all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
@@ -68,6 +70,23 @@ class Evaluation:
     clearance: np.ndarray
     cost_gradient: np.ndarray | None = None
     jacobian: sparse.csr_matrix | None = None
+
+
+@dataclass(frozen=True)
+class _RouteRows:
+    """A group of the route's rows: its ``kind`` (``pose``, ``rest``, ``return`` or ``total``),
+    their bounds and scales, each row's variable columns (-1 where fixed), the via (``node``: 1
+    the first, ``phases`` the goal) they hold, the configuration a return returns to (``ref``)
+    and the pose's end."""
+
+    kind: str
+    lower: np.ndarray
+    upper: np.ndarray
+    scale: np.ndarray
+    columns: list[np.ndarray]
+    node: int
+    ref: int | None = None
+    end: ToolEnd | None = None
 
 
 class ShootingProblem:
@@ -105,6 +124,13 @@ class ShootingProblem:
         The tool poses asked at the start and the goal (:class:`~modular_robots.ocp.ends.ToolEnd`):
         the ends become variables ``q_0`` and ``q_N`` (at rest), kept within those poses, with
         ``q_start`` and ``q_goal`` their first guess (None: the ends are fixed there).
+    max_time
+        The longest the motion may take, pauses included [s] (None: no limit).
+    route
+        The goals between the start and the goal (:class:`~modular_robots.ocp.route.Route`): the
+        motion is then one phase per move, each of ``settings.nodes - 1`` intervals and its own
+        free duration, a variable after the free ends (the first phase's is the first variable);
+        the via nodes between phases are held by ``route`` rows, and the pauses add their time.
     """
 
     def __init__(
@@ -121,6 +147,7 @@ class ShootingProblem:
         orientations: tuple[Orientation | None, Orientation | None] = (None, None),
         free_ends: tuple[ToolEnd, ToolEnd] | None = None,
         max_time: float | None = None,
+        route: Route = NO_ROUTE,
     ):
         if robot.nq != robot.nv:
             raise ProblemError(
@@ -135,6 +162,8 @@ class ShootingProblem:
         self.design = robot.design
         if max_time is not None and not (math.isfinite(max_time) and max_time > 0.0):
             raise ProblemError(f"max_time must be a positive number of seconds, got {max_time}")
+        if max_time is not None and route.hold >= max_time:
+            raise ProblemError(f"the pauses take {route.hold:g} s, at least max_time = {max_time:g} s")
         #: The longest the motion may take [s] (None: no limit but the solver's own, 1000 times
         #: the first guess's duration).
         self.max_time = max_time
@@ -147,7 +176,16 @@ class ShootingProblem:
         #: ``q_start`` and ``q_goal`` meet (step B's IK) and verification measures.
         self.orientations = orientations
         self.transcription = transcription(settings.transcription)
-        self.intervals = settings.nodes - 1
+        #: The goals between the start and the goal, and the pauses.
+        self.route = route
+        self.phases = route.phases
+        #: Intervals of each phase (``N = phases * phase_intervals``), each of a phase's duration
+        #: over this.
+        self.phase_intervals = settings.nodes - 1
+        self.intervals = self.phase_intervals * self.phases
+        #: The time the robot stands still in pauses [s]: part of the motion's duration.
+        self.hold = route.hold
+        self._phase = np.repeat(np.arange(self.phases), self.phase_intervals)  # each interval's phase
         self.substeps = int(substeps or settings.substeps)
         #: The velocity and effort bounds the plan keeps [rad/s | m/s, N m | N]: the robot's limits
         #: times the settings' margins (verification holds the plan to the full limits).
@@ -186,7 +224,7 @@ class ShootingProblem:
         if self.self_collision is not None:
             assert self.self_collision.farthest is not None  # the checked pairs
             self._self_rows = self.self_collision.within(settings.clearance_margin)
-            at_ends = self.self_collision.distances(np.vstack([self.q_start, self.q_goal]))[0].min(axis=0)
+            at_ends = self.self_collision.distances(self._chain())[0].min(axis=0)
             self._self_margins = np.minimum(
                 settings.clearance_margin,
                 0.5 * np.minimum(self.self_collision.farthest, at_ends)[self._self_rows],
@@ -198,26 +236,27 @@ class ShootingProblem:
         #: :meth:`~modular_robots.costs.Cost.lower_bound`; with free ends,
         #: :func:`~modular_robots.ocp.ends.free_ends_bound`). Used by step D to prune a candidate
         #: before it is solved.
-        self.cost_bound = (
-            self.objective.lower_bound(robot, self.q_start, self.q_goal, self.velocity_bound)
-            if free_ends is None
-            else free_ends_bound(self.objective, robot, free_ends, self.velocity_bound)
+        self.cost_bound = route_cost_bound(
+            self.objective, robot, self.q_start, self.q_goal, self.velocity_bound, free_ends, route
         )
-        #: A lower bound on the move's duration [s] (the time cost's bound, whatever the cost).
-        self.time_bound = (
-            COSTS["time"].lower_bound(robot, self.q_start, self.q_goal, self.velocity_bound)
-            if free_ends is None
-            else free_ends_bound(COSTS["time"], robot, free_ends, self.velocity_bound)
+        #: A lower bound on the motion's duration, pauses included [s] (the time cost's bound,
+        #: whatever the cost).
+        self.time_bound = route_cost_bound(
+            COSTS["time"], robot, self.q_start, self.q_goal, self.velocity_bound, free_ends, route
         )
         self.x_start = np.concatenate([self.q_start, np.zeros(nv)])
         self.x_goal = np.concatenate([self.q_goal, np.zeros(nv)])
 
+        #: The joint-space path of the first guess (with several phases: the chain of step B's
+        #: configurations, each move walked along its own detour).
         self.waypoints = (
-            detour_path(robot, self.collision, self.q_start, self.q_goal)
+            (self._chain() if self.phases > 1 else detour_path(robot, self.collision, self.q_start, self.q_goal))
             if waypoints is None
             else np.asarray(waypoints, dtype=float)
         )
-        self.tf_guess, guess_nodes, guess_acc = self._initial_motion()
+        phase_tf, guess_nodes, guess_acc = self._initial_motion()
+        #: The first guess's duration of the motion, pauses aside [s].
+        self.tf_guess = float(np.sum(phase_tf))
         #: The cost in its unit [s] is the scaled cost times this.
         self.cost_unit = self.tf_guess
         lower, upper = robot.lower, robot.upper
@@ -230,30 +269,61 @@ class ShootingProblem:
         #: The first column of the free ends ``q_0, q_N`` (after the controls; none when fixed).
         self._ends0 = self._u0 + N * nv
         ends = 0 if free_ends is None else 2
-        self.n_variables = self._ends0 + ends * nv
+        #: The columns of the phases' durations: the first variable, then after the free ends.
+        self.duration_columns = np.concatenate([[0], self._ends0 + ends * nv + np.arange(self.phases - 1)])
+        self.n_variables = self._ends0 + ends * nv + self.phases - 1
         self.variable_scale = np.concatenate(
-            [[self.tf_guess], np.tile(self.x_scale, N - 1), np.tile(self.u_scale, N), np.tile(q_scale, ends)]
+            [
+                [phase_tf[0]],
+                np.tile(self.x_scale, N - 1),
+                np.tile(self.u_scale, N),
+                np.tile(q_scale, ends),
+                phase_tf[1:],
+            ]
         )
         guess_u = self.transcription.initial_controls(robot, guess_nodes[:-1, :nv], guess_nodes[:-1, nv:], guess_acc)
         if self.transcription.controls_are_torques:
             guess_u = np.clip(guess_u, -self.effort_bound, self.effort_bound)
-        first_tf = self.tf_guess if max_time is None else min(self.tf_guess, max_time)
-        self._guess = self.pack(first_tf, guess_nodes, guess_u)
+        if max_time is not None and self.tf_guess > max_time - self.hold:
+            phase_tf = phase_tf * ((max_time - self.hold) / self.tf_guess)
+        self._guess = self.pack(phase_tf, guess_nodes, guess_u)
         self._build_bounds()
         self._build_pattern()
         self._cache: tuple[bytes, Evaluation] | None = None
 
     # -- layout --------------------------------------------------------------------------
-    def pack(self, tf: float, nodes: np.ndarray, controls: np.ndarray) -> np.ndarray:
-        """Scaled decision vector from ``tf`` [s], all ``N + 1`` node states and ``N`` controls."""
+    def pack(self, tf, nodes: np.ndarray, controls: np.ndarray) -> np.ndarray:
+        """Scaled decision vector from ``tf`` [s] (each phase's duration, with several), all
+        ``N + 1`` node states and ``N`` controls."""
         nodes = np.asarray(nodes)
-        parts: list[np.ndarray] = [np.array([tf]), nodes[1:-1].ravel(), np.asarray(controls).ravel()]
+        durations = np.broadcast_to(np.asarray(tf, dtype=float), (self.phases,))
+        parts: list[np.ndarray] = [durations[:1], nodes[1:-1].ravel(), np.asarray(controls).ravel()]
         if self.free_ends is not None:
             parts += [nodes[0, : self.nv], nodes[-1, : self.nv]]
+        parts.append(durations[1:])
         return np.concatenate(parts) / self.variable_scale
 
+    def durations(self, y: np.ndarray) -> np.ndarray:
+        """Each phase's duration [s] ``(phases,)``."""
+        return np.asarray(y, dtype=float)[self.duration_columns] * self.variable_scale[self.duration_columns]
+
+    def motion_time(self, y: np.ndarray) -> float:
+        """The motion's duration [s], its pauses included."""
+        return math.fsum(self.durations(y)) + self.hold
+
+    def stop_times(self, y: np.ndarray) -> np.ndarray:
+        """When each move ends [s] ``(phases,)``: at each via, then at the goal (the pauses before
+        it included; a pause there starts then)."""
+        holds = np.asarray(self.route.holds)
+        return holds[0] + np.cumsum(self.durations(y)) + np.concatenate([[0.0], np.cumsum(holds[1:-1])])
+
+    def interval_durations(self, y: np.ndarray) -> np.ndarray:
+        """Each interval's duration [s] ``(N,)``: its phase's over :attr:`phase_intervals`."""
+        return self.durations(y)[self._phase] / self.phase_intervals
+
     def unpack(self, y: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        """``(tf, nodes (N + 1, 2 nv), controls (N, nv))`` in SI units from a scaled vector."""
+        """``(tf, nodes (N + 1, 2 nv), controls (N, nv))`` in SI units from a scaled vector,
+        ``tf`` the motion's duration without the pauses (the phases' sum)."""
         z = np.asarray(y, dtype=float) * self.variable_scale
         inner = z[1 : self._u0].reshape(self.intervals - 1, self.nx)
         first, last = self.x_start, self.x_goal
@@ -262,7 +332,8 @@ class ShootingProblem:
             first = np.concatenate([z[self._ends0 : self._ends0 + self.nv], rest])
             last = np.concatenate([z[self._ends0 + self.nv :], rest])
         nodes = np.vstack([first, inner, last])
-        return float(z[0]), nodes, z[self._u0 : self._ends0].reshape(self.intervals, self.nv)
+        tf = float(z[0]) if self.phases == 1 else math.fsum(z[self.duration_columns])
+        return tf, nodes, z[self._u0 : self._ends0].reshape(self.intervals, self.nv)
 
     def initial_guess(self) -> np.ndarray:
         """Straight line in joint space (or a clear detour, see :mod:`~modular_robots.ocp.guess`), a trapezoidal
@@ -285,6 +356,7 @@ class ShootingProblem:
             self.orientations,
             self.free_ends,
             self.max_time,
+            self.route,
         )
 
     def refined(self, substeps: int | None = None, waypoints: np.ndarray | None = None) -> ShootingProblem:
@@ -304,6 +376,7 @@ class ShootingProblem:
             self.orientations,
             self.free_ends,
             self.max_time,
+            self.route,
         )
 
     def _configuration(self, q, label) -> np.ndarray:
@@ -315,12 +388,30 @@ class ShootingProblem:
             raise ProblemError(f"{label} = {np.round(q, 6).tolist()} is outside the joint limits")
         return q
 
+    def _chain(self) -> np.ndarray:
+        """The configurations at the start, at each via (step B's) and at the goal ``(P + 1, nv)``."""
+        return np.vstack([self.q_start, *(np.asarray(v.q, dtype=float) for v in self.route.vias), self.q_goal])
+
     def _initial_motion(self):
-        """``tf``, node states and node accelerations of the initial guess: the waypoint path
-        walked with a trapezoidal profile (one interval to speed up, one to stop), at a cruise
-        speed where the busiest joint moves at its velocity limit."""
-        N, nv = self.intervals, self.nv
-        path = self.waypoints
+        """Each phase's duration ``(P,)``, node states and node accelerations of the initial
+        guess: the waypoint path (each move's detour, with several phases) walked with a
+        trapezoidal profile (one interval to speed up, one to stop), at a cruise speed where the
+        busiest joint moves at its velocity limit."""
+        if self.phases == 1:
+            tf, nodes, acc = self._walk(self.waypoints, self.phase_intervals)
+            return np.array([tf]), nodes, acc
+        chain = self.waypoints
+        walks = [
+            self._walk(detour_path(self.robot, self.collision, a, b), self.phase_intervals)
+            for a, b in itertools.pairwise(chain)
+        ]
+        nodes = np.vstack([walks[0][1][:1], *(w[1][1:] for w in walks)])
+        return np.array([w[0] for w in walks]), nodes, np.vstack([w[2] for w in walks])
+
+    def _walk(self, path: np.ndarray, N: int):
+        """``tf``, the ``N + 1`` node states and ``N`` accelerations of ``path`` walked with the
+        trapezoidal profile, at rest at both ends."""
+        nv = self.nv
         seg_time = path_times(self.robot, path)
         total = float(seg_time.sum())
         tf = max(total * N / (N - 1), 1e-2)
@@ -333,7 +424,7 @@ class ShootingProblem:
             slope = (path[k + 1] - path[k]) / seg_time[k] if seg_time[k] > 0 else np.zeros(nv)
             nodes[m, :nv] = path[k] + slope * (lam - bounds[k])
             nodes[m, nv:] = slope if 0 < m < N else 0.0
-        nodes[N, :nv] = self.q_goal
+        nodes[N, :nv] = path[-1]
         acc = np.diff(nodes[:, nv:], axis=0) / h
         return tf, nodes, acc
 
@@ -347,11 +438,17 @@ class ShootingProblem:
         else:
             u_lo, u_hi = np.full(nv, -np.inf), np.full(nv, np.inf)
         ends = 0 if self.free_ends is None else 2
+        phase_tf = self.variable_scale[self.duration_columns]
+        shortest = 1e-3 * phase_tf
+        longest = 1e3 * phase_tf
+        if self.max_time is not None:
+            longest = np.minimum(longest, self.max_time - self.hold)
         lb = np.concatenate(
-            [[1e-3 * self.tf_guess], np.tile(x_lo, N - 1), np.tile(u_lo, N), np.tile(robot.lower, ends)]
+            [shortest[:1], np.tile(x_lo, N - 1), np.tile(u_lo, N), np.tile(robot.lower, ends), shortest[1:]]
         )
-        longest = 1e3 * self.tf_guess if self.max_time is None else min(1e3 * self.tf_guess, self.max_time)
-        ub = np.concatenate([[longest], np.tile(x_hi, N - 1), np.tile(u_hi, N), np.tile(robot.upper, ends)])
+        ub = np.concatenate(
+            [longest[:1], np.tile(x_hi, N - 1), np.tile(u_hi, N), np.tile(robot.upper, ends), longest[1:]]
+        )
         self.variable_lower = lb / self.variable_scale
         self.variable_upper = ub / self.variable_scale
         self._x_lo, self._x_hi = x_lo, x_hi
@@ -408,6 +505,14 @@ class ShootingProblem:
             lower_parts.append(np.concatenate([start_lo, goal_lo, clear_lo]))
             upper_parts.append(np.concatenate([start_hi, goal_hi, np.full(pairs, np.inf)]))
             scale_parts.append(np.ones(len(end_columns)))
+        self._route_groups = self._route_layout()
+        route_columns = [cols for group in self._route_groups for cols in group.columns]
+        if route_columns:
+            rows["route"] = start + len(end_columns) + np.arange(len(route_columns))
+            for group in self._route_groups:
+                lower_parts.append(group.lower)
+                upper_parts.append(group.upper)
+                scale_parts.append(group.scale)
         lower, upper, scale = (np.concatenate(v) for v in (lower_parts, upper_parts, scale_parts))
         self._rows = rows
         self.row_scale = scale
@@ -424,6 +529,9 @@ class ShootingProblem:
         if self.free_ends is not None:
             row_parts.append(np.repeat(rows["ends"], nv))
             col_parts.append(end_columns.ravel())
+        if route_columns:
+            row_parts.append(np.repeat(rows["route"], [len(c) for c in route_columns]))
+            col_parts.append(np.concatenate(route_columns))
         entry_rows, entry_cols = np.concatenate(row_parts), np.concatenate(col_parts)
         # Drop clearance rows of a fixed start point and rows without a finite bound.
         keep_row = np.isfinite(lower) | np.isfinite(upper)
@@ -463,11 +571,13 @@ class ShootingProblem:
         ):
             return self._cache[1]
         N, S, n, nv = self.intervals, self.substeps, self.nx, self.nv
-        tf, nodes, controls = self.unpack(y)
-        prop = self.transcription.propagate(self.robot, nodes[:-1], controls, tf, N, S, derivatives)
+        _, nodes, controls = self.unpack(y)
+        tf = self.durations(y)[self._phase]  # each interval's phase's duration
+        prop = self.transcription.propagate(self.robot, nodes[:-1], controls, tf, self.phase_intervals, S, derivatives)
         if not (np.all(np.isfinite(prop.states)) and np.all(np.isfinite(prop.torques))):
             raise NonFiniteError(
-                f"the dynamics of {self.robot.name!r} gave non-finite states or torques (tf = {tf:.4g} s)"
+                f"the dynamics of {self.robot.name!r} gave non-finite states or torques "
+                f"(tf = {tf.sum() / self.phase_intervals:.4g} s)"
             )
         middle_q, middle_sens = self._between_substeps(tf, prop, derivatives)
         clear, clear_grad = self._clearance(prop.states[:, :S, :nv].reshape(-1, nv), derivatives)
@@ -481,6 +591,8 @@ class ShootingProblem:
             values.append(prop.torques.ravel())
         end_values, end_jacobian = self._end_rows(nodes, derivatives)
         values.append(end_values)
+        route_values, route_data = self._route_rows(y, nodes, derivatives)
+        values.append(route_values)
         c = (np.concatenate(values) / self.row_scale)[self._keep_row]
         cost, cost_grad = self.objective.evaluate(self, tf, prop, derivatives)
         jac = None
@@ -494,6 +606,7 @@ class ShootingProblem:
             blocks.append(np.full(N * n, -1.0))
             if end_jacobian is not None:
                 blocks.append(end_jacobian)
+            blocks.append(route_data)
             data = np.concatenate([b.ravel() for b in blocks])[self._keep_entry] * self._entry_factor
             jac = sparse.csr_matrix(
                 (data[self._csr_order], self._csr_indices, self._csr_indptr),
@@ -530,7 +643,8 @@ class ShootingProblem:
         mu[np.flatnonzero(self._keep_row)[rows]] = multipliers
         mu /= self.row_scale
         cont, path, mid, tau = (mu[self._rows[k]] for k in ("continuity", "path", "midpoint", "torque"))
-        tf, _, controls = self.unpack(y)
+        _, _, controls = self.unpack(y)
+        tf = self.durations(y)[self._phase]
         prop = self.evaluate(y, derivatives=False).propagation
         weight_q, weight_v = np.zeros((N, S + 1, nv)), np.zeros((N, S + 1, nv))
         weight_q[:, S] += cont[:, 0, :nv]
@@ -540,7 +654,8 @@ class ShootingProblem:
         weight_q[:, :S] += 0.5 * mid
         weight_q[:, 1:] += 0.5 * mid
         q, v = prop.states[..., :nv].reshape(-1, nv), prop.states[..., nv:].reshape(-1, nv)
-        fractions = np.arange(S + 1) / (N * S)
+        M = self.phase_intervals
+        fractions = np.arange(S + 1) / (M * S)
         torque_rows = np.any(tau != 0.0)
         if torque_rows:
             weight = tau.reshape(-1, nv)
@@ -555,9 +670,9 @@ class ShootingProblem:
         if torque_rows:
             local += torque_hessians(fractions, tf, controls, prop.states[..., nv:], curvature)
         # The midpoint's Hermite term is -u (tf / (N S))^2 / 8.
-        f1 = 1.0 / (N * S)
+        f1 = 1.0 / (M * S)
         u_cols = 2 * nv + np.arange(nv)
-        extra = -0.25 * tf * f1**2 * mid.sum(axis=1)
+        extra = -0.25 * tf[:, None] * f1**2 * mid.sum(axis=1)
         local[:, u_cols, -1] += extra
         local[:, -1, u_cols] += extra
         local[:, -1, -1] += -0.25 * f1**2 * np.einsum("mjk,mk->m", mid, controls)
@@ -568,19 +683,20 @@ class ShootingProblem:
         data = local[keep] * self.variable_scale[r] * self.variable_scale[c]
         return sparse.csr_matrix((data, (r, c)), shape=(self.n_variables, self.n_variables))
 
-    def _between_substeps(self, tf: float, prop: Propagation, derivatives: bool):
+    def _between_substeps(self, tf: np.ndarray, prop: Propagation, derivatives: bool):
         """Every sub-step's midpoint configuration ``(N, S, nv)`` on the cubic Hermite interpolant
-        of its end states (module docstring), and its sensitivities to the interval parameters."""
-        N, S, nv = self.intervals, self.substeps, self.nv
-        h = tf / (N * S)
+        of its end states (module docstring), and its sensitivities to the interval parameters
+        (``tf`` each interval's phase's duration [s])."""
+        M, S, nv = self.phase_intervals, self.substeps, self.nv
+        h = (tf / (M * S))[:, None, None]
         q, v = prop.states[:, :, :nv], prop.states[:, :, nv:]
         middle = 0.5 * (q[:, :S] + q[:, 1:]) + 0.125 * h * (v[:, :S] - v[:, 1:])
         if not derivatives:
             return middle, None
         assert prop.state_sens is not None, "propagated without sensitivities"
         dq, dv = prop.state_sens[:, :, :nv], prop.state_sens[:, :, nv:]
-        sens = 0.5 * (dq[:, :S] + dq[:, 1:]) + 0.125 * h * (dv[:, :S] - dv[:, 1:])
-        sens[..., -1] += 0.125 * (v[:, :S] - v[:, 1:]) / (N * S)
+        sens = 0.5 * (dq[:, :S] + dq[:, 1:]) + 0.125 * h[..., None] * (dv[:, :S] - dv[:, 1:])
+        sens[..., -1] += 0.125 * (v[:, :S] - v[:, 1:]) / (M * S)
         return middle, sens
 
     def _end_rows(self, nodes: np.ndarray, derivatives: bool) -> tuple[np.ndarray, np.ndarray | None]:
@@ -599,6 +715,88 @@ class ShootingProblem:
             return values, None
         assert start_jacobian is not None and goal_jacobian is not None and clear_grad is not None
         return values, np.vstack([start_jacobian, goal_jacobian, clear_grad[0]])
+
+    def _node_columns(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The columns of node ``k``'s configuration and velocity (-1 where fixed)."""
+        n, nv, N = self.nx, self.nv, self.intervals
+        fixed = np.full(nv, -1)
+        if 0 < k < N:
+            first = 1 + (k - 1) * n
+            return first + np.arange(nv), first + nv + np.arange(nv)
+        if self.free_ends is None:
+            return fixed, fixed
+        return self._ends0 + (0 if k == 0 else nv) + np.arange(nv), fixed
+
+    def _via_node(self, index: int) -> int:
+        """The node of configuration ``index`` of the route: 0 the start, ``k`` the ``k``-th via."""
+        return index * self.phase_intervals
+
+    def _route_layout(self) -> list[_RouteRows]:
+        """The route's rows in order (module docstring; :class:`~modular_robots.ocp.route.Route`):
+        each via's pose, its zero velocity, its return; the goal's return (unless both ends are
+        the fixed start); the motion's total duration when several phases share ``max_time``."""
+        nv, groups = self.nv, []
+        q_scale, v_scale = self.x_scale[:nv], self.x_scale[nv:]
+        zero = np.zeros(nv)
+        for j, via in enumerate(self.route.vias, start=1):
+            q_cols, v_cols = self._node_columns(self._via_node(j))
+            if via.end is not None:
+                lo, hi = via.end.bounds()
+                groups.append(
+                    _RouteRows("pose", lo, hi, np.ones(via.end.size), [q_cols] * via.end.size, j, end=via.end)
+                )
+            if via.rest:
+                groups.append(_RouteRows("rest", zero, zero, v_scale, [np.array([c]) for c in v_cols], j))
+            if via.returns_to is not None:
+                ref = self._node_columns(self._via_node(via.returns_to))[0]
+                cols = [np.array([a, b]) for a, b in zip(q_cols, ref)]
+                groups.append(_RouteRows("return", zero, zero, q_scale, cols, j, via.returns_to))
+        back = self.route.goal_returns_to
+        if back is not None and (self.free_ends is not None or back != 0):
+            q_cols = self._node_columns(self.intervals)[0]
+            ref = self._node_columns(self._via_node(back))[0]
+            cols = [np.array([a, b]) for a, b in zip(q_cols, ref)]
+            groups.append(_RouteRows("return", zero, zero, q_scale, cols, self.phases, back))
+        if self.phases > 1 and self.max_time is not None:
+            longest = np.array([self.max_time - self.hold])
+            groups.append(
+                _RouteRows("total", np.array([-np.inf]), longest, np.array([self.tf_guess]), [self.duration_columns], 0)
+            )
+        return groups
+
+    def _route_rows(self, y: np.ndarray, nodes: np.ndarray, derivatives: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The route's rows (:meth:`_route_layout`) and their Jacobian's entries, in the order of
+        the layout's columns."""
+        nv = self.nv
+        values: list[np.ndarray] = []
+        data: list[np.ndarray] = []
+        for group in self._route_groups:
+            node = nodes[self._via_node(group.node), :nv] if group.node < self.phases else nodes[-1, :nv]
+            if group.kind == "pose":
+                assert group.end is not None
+                value, jacobian = end_rows(self.robot, group.end, node, derivatives)
+                values.append(value)
+                if jacobian is not None:
+                    data.append(jacobian.ravel())
+            elif group.kind == "rest":
+                values.append(nodes[self._via_node(group.node), nv:])
+                data.append(np.ones(nv))
+            elif group.kind == "return":
+                assert group.ref is not None
+                values.append(node - nodes[self._via_node(group.ref), :nv])
+                data.append(np.tile([1.0, -1.0], nv))
+            else:
+                values.append(np.array([self.durations(y).sum()]))
+                data.append(np.ones(self.phases))
+        if not values:
+            return np.zeros(0), np.zeros(0)
+        return np.concatenate(values), (np.concatenate(data) if derivatives else np.zeros(0))
+
+    @property
+    def estimated_blocks(self) -> tuple[str, ...]:
+        """The blocks whose second derivatives :meth:`exact_hessian` does not give (the solver's
+        ``structured`` Hessian estimates them): the clearance, the free ends' and the route's."""
+        return tuple(name for name in ("clearance", "ends", "route") if name in self._rows)
 
     def _clearance(self, qs: np.ndarray, derivatives: bool):
         """The clearance rows' values at ``qs`` ``(K, nv)``: every obstacle's distance to the
@@ -627,8 +825,8 @@ class ShootingProblem:
 
     @property
     def interval_columns(self) -> np.ndarray:
-        """``(N, p)``: the variable of each of interval ``m``'s parameters ``(s_m, u_m, tf)``; -1
-        for the fixed ``s_0``."""
+        """``(N, p)``: the variable of each of interval ``m``'s parameters ``(s_m, u_m, tf)``
+        (``tf`` its phase's duration); -1 for the fixed ``s_0``."""
         return self._cols
 
     def _interval_columns(self, m: int) -> np.ndarray:
@@ -638,7 +836,7 @@ class ShootingProblem:
         state = 1 + (m - 1) * n + np.arange(n) if m >= 1 else np.full(n, -1)
         if m == 0 and self.free_ends is not None:
             state[:nv] = self._ends0 + np.arange(nv)
-        return np.concatenate([state, self._u0 + m * nv + np.arange(nv), [0]])
+        return np.concatenate([state, self._u0 + m * nv + np.arange(nv), [self.duration_columns[self._phase[m]]]])
 
     # -- conveniences for the solver ----------------------------------------------------------
     def cost(self, y: np.ndarray) -> float:

@@ -272,7 +272,7 @@ class ShootingSolver:
         self._seconds += time.perf_counter() - self._clock
         problem = self.problem
         y = np.array(state.x, dtype=float)
-        tf = float(y[0] * problem.variable_scale[0])
+        tf = problem.motion_time(y)
         iterate = Iterate(
             self.iteration_offset + int(state.nit),
             float(state.fun) * problem.cost_unit,
@@ -333,7 +333,7 @@ class ShootingSolver:
                 self.iteration_offset + int(result.nit),
                 float(result.fun) * self.problem.cost_unit,
                 float(result.constr_violation),
-                float(y[0] * self.problem.variable_scale[0]),
+                self.problem.motion_time(y),
                 y,
                 float(result.optimality),
                 cost_bound=self.problem.cost_bound,
@@ -355,7 +355,7 @@ class ShootingSolver:
 
         if exact and problem.has_exact_hessian and self.hessian == "structured":
             exact_rows = problem.rows_of("continuity", "path", "midpoint", "torque")
-            clearance_rows = problem.rows_of("clearance", *(("ends",) if problem.free_ends is not None else ()))
+            clearance_rows = problem.rows_of(*problem.estimated_blocks)
             constraints = [
                 _rows_constraint(problem, exact_rows, lambda y, v: problem.exact_hessian(y, v, exact_rows)),
                 _rows_constraint(problem, clearance_rows, _SR1()),

@@ -9,8 +9,10 @@ Two transcriptions share one interface (SPEC §5):
   interval; the motion is integrated exactly (a parabola) and the torque it needs,
   ``tau = RNEA(q, qdot, qddot)``, is what the torque limits bound.
 
-Every function works on all intervals at once: ``x0`` is ``(N, 2 nv)``, ``u`` is ``(N, nv)``.
-Sensitivities are taken with respect to the interval's own parameters ``p = (x0, u, tf)``
+Every function works on all intervals at once: ``x0`` is ``(N, 2 nv)``, ``u`` is ``(N, nv)``,
+``tf`` a duration [s] shared by all or one per interval ``(N,)`` (its phase's: an interval lasts
+``tf / intervals``). Sensitivities are taken with respect to the interval's own parameters
+``p = (x0, u, tf)``
 (``2 nv + nv + 1`` columns) and are exact: Pinocchio's analytical derivatives chained through
 the integrator.
 """
@@ -55,7 +57,7 @@ class Transcription:
         robot: RobotModel,
         x0: np.ndarray,
         u: np.ndarray,
-        tf: float,
+        tf: float | np.ndarray,
         intervals: int,
         substeps: int,
         derivatives: bool,
@@ -111,7 +113,7 @@ class ForwardDynamics(Transcription):
         n_int, n = x0.shape
         nv = n // 2
         p = n + nv + 1
-        h = tf / (intervals * substeps)
+        h = (np.broadcast_to(np.asarray(tf, dtype=float), (n_int,)) / (intervals * substeps))[:, None]
         dh = 1.0 / (intervals * substeps)  # d h / d tf
         states = np.empty((n_int, substeps + 1, n))
         states[:, 0] = x0
@@ -176,8 +178,8 @@ class ForwardDynamics(Transcription):
 
 
 def _stage(X, K, k, h, dh):
-    """Sensitivity of ``x + h k`` where ``h`` depends on ``tf`` (the last parameter)."""
-    out = X + h * K
+    """Sensitivity of ``x + h k`` where ``h`` ``(N, 1)`` depends on ``tf`` (the last parameter)."""
+    out = X + h[:, :, None] * K
     out[:, :, -1] += dh * k
     return out
 
@@ -207,11 +209,11 @@ class InverseDynamics(Transcription):
         nv = n // 2
         p = n + nv + 1
         frac = np.arange(substeps + 1) / (intervals * substeps)  # s / tf at each sub-step
-        s = tf * frac
+        s = np.broadcast_to(np.asarray(tf, dtype=float), (n_int,))[:, None] * frac  # (N, S + 1)
         q0, v0 = x0[:, None, :nv], x0[:, None, nv:]
         a = u[:, None, :]
-        v = v0 + a * s[None, :, None]
-        q = q0 + v0 * s[None, :, None] + 0.5 * a * (s**2)[None, :, None]
+        v = v0 + a * s[:, :, None]
+        q = q0 + v0 * s[:, :, None] + 0.5 * a * (s**2)[:, :, None]
         states = np.concatenate([q, v], axis=2)
         torques = np.empty((n_int, substeps + 1, nv))
         model, data = robot.model, robot.data
@@ -225,11 +227,11 @@ class InverseDynamics(Transcription):
         eye = np.eye(nv)
         sens = np.zeros((n_int, substeps + 1, n, p))
         sens[:, :, :nv, :nv] = eye
-        sens[:, :, :nv, nv:n] = s[None, :, None, None] * eye
-        sens[:, :, :nv, n : n + nv] = 0.5 * (s**2)[None, :, None, None] * eye
+        sens[:, :, :nv, nv:n] = s[:, :, None, None] * eye
+        sens[:, :, :nv, n : n + nv] = 0.5 * (s**2)[:, :, None, None] * eye
         sens[:, :, :nv, -1] = v * frac[None, :, None]
         sens[:, :, nv:, nv:n] = eye
-        sens[:, :, nv:, n : n + nv] = s[None, :, None, None] * eye
+        sens[:, :, nv:, n : n + nv] = s[:, :, None, None] * eye
         sens[:, :, nv:, -1] = a * frac[None, :, None]
         dq = np.empty((n_int, substeps + 1, nv, nv))
         dv = np.empty_like(dq)

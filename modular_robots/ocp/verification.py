@@ -130,30 +130,38 @@ def verify(
     """
     robot, tr = problem.robot, problem.transcription
     tf, nodes, controls = problem.unpack(y)
-    N, S, nv = problem.intervals, problem.substeps, problem.nv
-    hs = tf / (N * S)
+    N, S, nv, M = problem.intervals, problem.substeps, problem.nv, problem.phase_intervals
+    durations = problem.durations(y)
     vmax, tmax = robot.velocity_limit, robot.effort_limit
     span = np.where(
         np.isfinite(robot.upper - robot.lower) & (robot.upper > robot.lower), robot.upper - robot.lower, 1.0
     )
-    planned = problem.transcription.propagate(robot, nodes[:-1], controls, tf, N, S, False).states
+    phase_tf = np.repeat(durations, M)
+    planned = problem.transcription.propagate(robot, nodes[:-1], controls, phase_tf, M, S, False).states
     ends = np.concatenate([planned[:, 1:S], nodes[1:, None]], axis=1)  # (N, S, 2 nv)
-    starts = np.tile(np.arange(S) * hs, N)  # each sub-step's offset into its interval [s]
-    interval_nodes, interval_controls = np.repeat(nodes[:N], S, axis=0), np.repeat(controls, S, axis=0)
-    x0 = planned[:, :S].reshape(N * S, 2 * nv)
     # The dense grid: points_per_substep points per sub-step, and the interval's end after its last.
-    grid = np.linspace(0.0, hs, points_per_substep + 1)
-    run = _substeps(problem, interval_nodes, interval_controls, starts, x0, hs, rtol, atol, grid)
-    if run is None:
-        return Verification(np.inf, np.inf, np.inf, -np.inf, np.inf, np.inf, np.inf, 0, S)
-    end, dense = run
+    grid_points = points_per_substep + 1
+    end = np.empty((N * S, 2 * nv))
+    dense = np.empty((N * S, grid_points, 2 * nv))
+    seconds = np.empty((N, S, grid_points))
+    for k, duration in enumerate(durations):  # a phase's sub-steps share their duration
+        hs = float(duration) / (M * S)
+        rows = slice(k * M * S, (k + 1) * M * S)
+        starts = np.tile(np.arange(S) * hs, M)  # each sub-step's offset into its interval [s]
+        phase = slice(k * M, (k + 1) * M)
+        x0 = planned[phase, :S].reshape(M * S, 2 * nv)
+        grid = np.linspace(0.0, hs, grid_points)
+        interval_nodes, interval_controls = np.repeat(nodes[phase], S, axis=0), np.repeat(controls[phase], S, axis=0)
+        run = _substeps(problem, interval_nodes, interval_controls, starts, x0, hs, rtol, atol, grid)
+        if run is None:
+            return Verification(np.inf, np.inf, np.inf, -np.inf, np.inf, np.inf, np.inf, 0, S)
+        end[rows], dense[rows] = run
+        seconds[phase] = starts.reshape(M, S, 1) + grid
     gap = np.abs(end.reshape(N, S, 2 * nv) - ends) / problem.x_scale
     defect = float(np.max(gap.sum(axis=1)))
-    dense = dense.reshape(N, S, len(grid), 2 * nv)
-    seconds = starts.reshape(N, S, 1) + grid
-    samples = np.zeros((N, S, len(grid)), dtype=bool)
+    samples = np.zeros((N, S, grid_points), dtype=bool)
     samples[:, :, :-1] = samples[:, -1, -1] = True
-    states = dense[samples]
+    states = dense.reshape(N, S, grid_points, 2 * nv)[samples]
     q, v = states[:, :nv], states[:, nv:]
     where = np.nonzero(samples)
     torques = tr.torque(robot, nodes[where[0]], controls[where[0]], seconds[samples])
@@ -168,13 +176,15 @@ def verify(
     vel_share = np.max(np.abs(v) / vmax, axis=0)
     tau_share = np.max(np.abs(torques) / tmax, axis=0)
     points = len(states)
-    last = _integrate(problem, nodes[N - 1 : N], controls[N - 1 :], np.zeros(1), nodes[N - 1 : N], S * hs, rtol, atol)
+    last_node = nodes[N - 1 : N]
+    last = _integrate(problem, last_node, controls[N - 1 :], np.zeros(1), last_node, durations[-1] / M, rtol, atol)
     x = last[0][0] if last is not None else np.full(2 * nv, np.inf)
     error = float(np.linalg.norm(robot.tool_position(x[:nv]) - robot.tool_position(nodes[N, :nv])))
     excess = 0.0
     for orientation, q in zip(problem.orientations, (nodes[0, :nv], nodes[N, :nv])):
         if orientation is not None:
             excess = max(excess, orientation.angle(robot.tool_rotation(q)) - orientation.tolerance)
+    goal_excess, goal_angle = _goals(problem, nodes)
     return Verification(
         error,
         float(np.max(np.abs(x[nv:]))),
@@ -187,6 +197,33 @@ def verify(
         S,
         tuple(map(float, vel_share)),
         tuple(map(float, tau_share)),
-        excess,
-        max(tf / problem.max_time - 1.0, 0.0) if problem.max_time is not None else 0.0,
+        max(excess, goal_angle),
+        max((tf + problem.hold) / problem.max_time - 1.0, 0.0) if problem.max_time is not None else 0.0,
+        goal_excess,
     )
+
+
+def _goals(problem: ShootingProblem, nodes: np.ndarray) -> tuple[float, float]:
+    """At each via of the plan (the goals between the start and the end), measured on the
+    planned node with Pinocchio's kinematics: the largest distance [m] beyond a pose's position
+    tolerance, the largest joint distance [rad | m] from the configuration a return asks, or
+    speed [rad/s | m/s] where the goal asks rest (the larger of these, 0 when all hold), and the
+    largest angle [rad] beyond an orientation tolerance."""
+    robot, nv, excess, angle = problem.robot, problem.nv, 0.0, 0.0
+    route = problem.route
+    node = [0, *(j * problem.phase_intervals for j in range(1, route.phases)), problem.intervals]
+    for j, via in enumerate(route.vias, start=1):
+        q, v = nodes[node[j], :nv], nodes[node[j], nv:]
+        if via.end is not None:
+            distance = float(np.linalg.norm(robot.tool_position(q) - np.asarray(via.end.position)))
+            excess = max(excess, distance - via.end.tolerance)
+            if via.end.orientation is not None:
+                orientation = via.end.orientation
+                angle = max(angle, orientation.angle(robot.tool_rotation(q)) - orientation.tolerance)
+        if via.rest:
+            excess = max(excess, float(np.max(np.abs(v))))
+        if via.returns_to is not None:
+            excess = max(excess, float(np.max(np.abs(q - nodes[node[via.returns_to], :nv]))))
+    if route.goal_returns_to is not None:
+        excess = max(excess, float(np.max(np.abs(nodes[-1, :nv] - nodes[node[route.goal_returns_to], :nv]))))
+    return excess, angle

@@ -64,6 +64,9 @@ class CandidateResult:
     #: The rest configurations it moves between [rad | m] (empty if it never started).
     q_start: tuple[float, ...] = ()
     q_goal: tuple[float, ...] = ()
+    #: Among several goals, when each move ends [s]: at each goal that moves, in order (a pause
+    #: there starts then); empty for a single move.
+    stop_times: tuple[float, ...] = ()
     y: np.ndarray | None = field(default=None, repr=False, compare=False)
     waypoints: np.ndarray | None = field(default=None, repr=False, compare=False)
     trajectory: Trajectory | None = field(default=None, repr=False, compare=False)

@@ -46,6 +46,7 @@ from .verification import Verification
 
 if TYPE_CHECKING:
     from ..collision import Approach
+    from ..goals import Goal
     from ..scenario import Scenario, Task
 
 __all__ = [
@@ -102,7 +103,22 @@ def task_json(task: Task) -> dict:
         "start_tolerance": task.start_tolerance,
         "goal_tolerance": task.goal_tolerance,
         "max_time": task.max_time,
+        **({"goals": [goal_json(g) for g in task.goals]} if task.goals else {}),
     }
+
+
+def goal_json(goal: Goal) -> dict:
+    """One of a task's ``goals``, as the scenario gives it (:mod:`~modular_robots.goals`)."""
+    out: dict = {"kind": goal.kind, "id": goal.id}
+    if goal.position is not None:
+        out["position"] = list(goal.position)
+        out["orientation"] = goal.orientation.to_json() if goal.orientation else None
+        out["tolerance"] = goal.tolerance
+    if goal.kind == "pause":
+        out["duration"] = goal.duration
+    if goal.kind == "return":
+        out["to"] = goal.to
+    return out
 
 
 def _finite(value: float | None) -> float | None:
@@ -140,6 +156,7 @@ def candidate_json(r: CandidateResult, design: Design | None = None) -> dict:
         "cost_history": [_finite(c) for c in r.cost_history],
         "violation_history": [_finite(c) for c in r.violation_history],
         "refinement_history": list(r.refinement_history),
+        **({"stop_times": list(r.stop_times)} if r.stop_times else {}),
     }
 
 
@@ -347,7 +364,16 @@ def _task(n: Node) -> TaskRecord:
         goal=n["goal"].numbers(size=3),
         obstacles=tuple(o.obstacle() for o in obstacles),
         cost=n["cost"].string(),
+        waypoints=_waypoints(n),
     )
+
+
+def _waypoints(task: Node) -> tuple[tuple[float, ...], ...]:
+    """The positions of a task's goals but the last that has one (``goals``; none for one move)."""
+    if not task.has("goals"):
+        return ()
+    positions = [g["position"].numbers(size=3) for g in task["goals"].items() if g.has("position")]
+    return tuple(positions[:-1])
 
 
 def _design_record(n: Node) -> Design:
@@ -379,6 +405,7 @@ def _verification(n: Node) -> VerificationRecord:
         orientation_excess=n["orientation_excess"].number(0.0) if n.has("orientation_excess") else 0.0,
         passed=n["passed"].boolean(),
         duration_excess=n["duration_excess"].number(0.0) if n.has("duration_excess") else 0.0,
+        goal_excess=n["goal_excess"].number(0.0) if n.has("goal_excess") else 0.0,
     )
 
 
@@ -510,7 +537,7 @@ def drawn_task(document: ResultDocument | Mapping[str, Any]) -> DrawnTask:
     may be missing (no start or goal, no obstacles, a margin of 0)."""
     if isinstance(document, ResultDocument):
         read = document.task
-        return DrawnTask(read.start, read.goal, read.obstacles, document.settings.clearance_margin)
+        return DrawnTask(read.start, read.goal, read.obstacles, document.settings.clearance_margin, read.waypoints)
     n = Node(document, RESULT)
     task = n["task"] if n.has("task") else Node({}, RESULT, "task")
     settings = n["settings"] if n.has("settings") else Node({}, RESULT, "settings")
@@ -520,4 +547,5 @@ def drawn_task(document: ResultDocument | Mapping[str, Any]) -> DrawnTask:
         goal=task["goal"].optional(lambda m: m.numbers(size=3)),
         obstacles=tuple(o.obstacle() for o in task["obstacles"].items()) if task.has("obstacles") else (),
         clearance_margin=optimizer["clearance_margin"].number(0.0) if optimizer.has("clearance_margin") else 0.0,
+        waypoints=_waypoints(task),
     )

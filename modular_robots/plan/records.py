@@ -54,24 +54,28 @@ class WinnerFiles:
 @dataclass(frozen=True)
 class TaskRecord:
     """The task as the run read it: ``payload`` [kg], tool ``start`` and ``goal`` [m, base frame],
-    the ``obstacles`` (read back through their shapes' JSON form), the ``cost`` minimised."""
+    the ``obstacles`` (read back through their shapes' JSON form), the ``cost`` minimised, and
+    the positions [m] of the goals between the start and the last one, if several."""
 
     payload: float
     start: tuple[float, ...]
     goal: tuple[float, ...]
     obstacles: tuple[Obstacle, ...]
     cost: str
+    waypoints: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)
 class DrawnTask:
     """What a page draws of the task: tool ``start`` and ``goal`` [m, base frame] (``None``: not
-    given), the ``obstacles``, and the ``clearance_margin`` [m] kept from them."""
+    given), the ``obstacles``, the ``clearance_margin`` [m] kept from them, and the positions of
+    the goals in between."""
 
     start: tuple[float, ...] | None
     goal: tuple[float, ...] | None
     obstacles: tuple[Obstacle, ...]
     clearance_margin: float
+    waypoints: tuple[tuple[float, ...], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -107,6 +111,7 @@ class VerificationRecord:
     orientation_excess: float
     passed: bool
     duration_excess: float = 0.0
+    goal_excess: float = 0.0
 
 
 @dataclass(frozen=True)

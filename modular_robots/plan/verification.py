@@ -13,6 +13,7 @@ __all__ = [
     "LIMIT_TOLERANCE",
     "CLEARANCE_TOLERANCE",
     "ANGLE_TOLERANCE",
+    "GOAL_TOLERANCE",
 ]
 
 #: Largest terminal tool-position error accepted without refinement [m] (SPEC §5: 1 cm).
@@ -26,6 +27,9 @@ LIMIT_TOLERANCE = 1e-3
 CLEARANCE_TOLERANCE = 1e-5
 #: Angle beyond an end's orientation tolerance still counted as within it [rad] (rounding).
 ANGLE_TOLERANCE = 1e-6
+#: What a goal between the start and the end may miss by [m, rad/s | m/s, rad | m]: the
+#: solver's constraint tolerance, with room for the rows' scaling.
+GOAL_TOLERANCE = 1e-5
 
 
 @dataclass(frozen=True)
@@ -45,7 +49,11 @@ class Verification:
     the ends of the plan, by how much the angle between the tool's orientation and the one the
     task asks there exceeds its tolerance (0 within it, or when the task asks none);
     ``duration_excess``: by how much ``tf`` exceeds the task's ``max_time``, relative to it (0
-    within it, or when the task sets none).
+    within it, or when the task sets none); ``goal_excess``: at the goals between the start and
+    the end, the largest distance [m] of the tool beyond a goal's position tolerance, joint speed
+    where a goal asks rest, or joint distance from the configuration a return asks (0 when all
+    hold; :data:`GOAL_TOLERANCE`); the orientation at those goals counts in
+    ``orientation_excess``.
     """
 
     terminal_error: float
@@ -61,6 +69,11 @@ class Verification:
     effort_share: tuple[float, ...] = ()
     orientation_excess: float = 0.0
     duration_excess: float = 0.0
+    goal_excess: float = 0.0
+
+    @property
+    def goals_ok(self) -> bool:
+        return self.goal_excess <= GOAL_TOLERANCE
 
     @property
     def duration_ok(self) -> bool:
@@ -99,4 +112,5 @@ class Verification:
             and self.clearance_ok
             and self.orientation_ok
             and self.duration_ok
+            and self.goals_ok
         )

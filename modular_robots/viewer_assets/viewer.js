@@ -16,7 +16,8 @@
   scene.add(sun);
 
   // the extent of everything drawn, to place the camera and the floor grid
-  const points = [[0, 0, 0]].concat(S.tool, S.start ? [S.start] : [], S.goal ? [S.goal] : []);
+  const waypoints = S.waypoints || [];
+  const points = [[0, 0, 0]].concat(S.tool, S.start ? [S.start] : [], S.goal ? [S.goal] : [], waypoints);
   S.obstacles.forEach((o) => points.push(o.center));
   const box = new THREE.Box3().setFromPoints(points.map((p) => new THREE.Vector3(p[0], p[1], p[2])));
   const centre = box.getCenter(new THREE.Vector3());
@@ -80,6 +81,7 @@
   });
   if (S.start) scene.add(sphere(0.035, material(0x16a34a), S.start));
   if (S.goal) scene.add(sphere(0.035, material(0x222222), S.goal));
+  waypoints.forEach((p) => scene.add(sphere(0.03, material(0x2563eb), p)));
   const path = new THREE.BufferGeometry().setFromPoints(S.tool.map((p) => new THREE.Vector3(p[0], p[1], p[2])));
   scene.add(new THREE.Line(path, new THREE.LineBasicMaterial({ color: 0x333333 })));
 

@@ -1,0 +1,245 @@
+"""Tasks of several goals (:mod:`modular_robots.goals`): the scenario format, step B's chain of
+configurations, step C's problem over phases, and the solved motion checked independently.
+
+References used here:
+
+* central finite differences of the phased problem's constraints and cost (its exact Jacobian
+  and gradient must agree with them, the phases' duration columns and the route's rows among
+  them);
+* the sampled plan read at the goals' instants with Pinocchio's forward kinematics, not the
+  solver's rows: the tool within each goal's tolerance, at rest where the goal asks it, standing
+  still for each pause, back at the configuration a return names, the goals in order;
+* the single-move problem: a route without vias is the same problem, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from modular_robots.composition import Composition
+from modular_robots.exceptions import ScenarioError
+from modular_robots.feasibility import check_composition
+from modular_robots.goals import Goal, stops_of
+from modular_robots.ocp.candidate import make_candidate
+from modular_robots.pipeline import candidate_specs, cost_bound
+from modular_robots.plan.trajectory import controller_rate
+from modular_robots.scenario import load_scenario
+
+from .helpers.paths import ROOT
+from .test_shooting import central_difference, row_relative_error
+
+TWO_GOALS = ROOT / "scenarios" / "improv-two-goals.yaml"
+PAUSE = ROOT / "scenarios" / "improv-pick-pause.yaml"
+#: A composition of the IMPROV 4-joint catalogue that passes step B on both scenarios.
+ROBOT = "base-PB21-L1-PB23-L4-L3"
+
+
+def _scenario_text(goals: str, cost: str = "time") -> str:
+    return f"""
+name: goals
+catalog: {ROOT / "scenarios" / "catalogs" / "improv-4dof.yaml"}
+task:
+  payload: 1.0
+  start: [0.45, 0.25, 0.25]
+  goals:
+{goals}
+  cost: {cost}
+"""
+
+
+def _load(tmp_path, goals: str, cost: str = "time"):
+    path = tmp_path / "goals.yaml"
+    path.write_text(_scenario_text(goals, cost))
+    return load_scenario(path)
+
+
+# --------------------------------------------------------------------------------------------
+# the scenario format
+# --------------------------------------------------------------------------------------------
+def test_goals_are_read_in_order_and_the_task_ends_at_the_last_pose(tmp_path):
+    scenario = _load(
+        tmp_path,
+        """    - at: {position: [0.1, 0.55, 0.45], position_tolerance: 0.02}
+    - reach: [-0.25, 0.45, 0.35]
+      id: place
+    - pause: 0.4
+    - return: start""",
+    )
+    task = scenario.task
+    assert [g.kind for g in task.goals] == ["at", "reach", "pause", "return"]
+    assert [g.id for g in task.goals] == ["1", "place", "3", "4"]
+    assert task.goal == task.start  # a return to the start ends there
+    assert [label for label, _ in task.targets] == ["start", "goal 1", "goal place"]
+    hold, stops = stops_of(task.goals)
+    assert hold == 0.0
+    assert [(s.goal, s.rest, s.returns_to, s.hold) for s in stops] == [
+        (0, False, None, 0.0),
+        (1, True, None, 0.4),
+        (3, True, 0, 0.0),
+    ]
+
+
+def test_the_last_goal_is_at_rest_and_pauses_add_up():
+    goals = (
+        Goal("pause", "1", duration=0.2),
+        Goal("at", "2", (0.3, 0.0, 0.3)),
+        Goal("pause", "3", duration=0.1),
+        Goal("pause", "4", duration=0.3),
+        Goal("at", "5", (0.0, 0.3, 0.3)),
+    )
+    hold, stops = stops_of(goals)
+    assert hold == pytest.approx(0.2)
+    assert stops[0].rest and stops[0].hold == pytest.approx(0.4)  # a pause stops the robot
+    assert stops[1].rest  # the motion ends at rest
+
+
+@pytest.mark.parametrize(
+    "goals, key, words",
+    [
+        ("    - follow: [0.1, 0.5, 0.4]", "goals[0].follow", "expected exactly one of at, reach, pause, return"),
+        ("    - reach: [0.1, 0.5, 0.4]\n    - return: 7", "goals[1].return", "no earlier goal with id '7'"),
+        (
+            "    - reach: [0.1, 0.5, 0.4]\n      id: a\n    - at: [0.2, 0.5, 0.4]\n      id: a",
+            "goals[1].id",
+            "used twice",
+        ),
+        ("    - reach: [0.45, 0.25, 0.2502]", "goals[0].reach", "from the one before"),
+        ("    - reach: [0.1, 0.5, 0.4]\n    - pause: 0", "goals[1].pause", "expected a number > 0"),
+        ("    - pause: 0.3", "goals", "at least one goal that moves"),
+        ("    - reach: [0.1, 0.5, 0.4]\n      at: [0.2, 0.5, 0.4]", "goals[0]", "expected exactly one of"),
+    ],
+)
+def test_bad_goals_are_refused_naming_the_key(tmp_path, goals, key, words):
+    with pytest.raises(ScenarioError) as error:
+        _load(tmp_path, goals)
+    message = str(error.value)
+    assert f"task.{key}" in message and words in message, message
+    assert ":" in message.split("task.")[0]  # file:line before the key
+
+
+def test_effort_with_a_pause_is_refused(tmp_path):
+    with pytest.raises(ScenarioError, match=r"task\.cost: the effort of a task with a pause"):
+        _load(tmp_path, "    - reach: [0.1, 0.5, 0.4]\n    - pause: 0.3", cost="effort")
+
+
+def test_goal_and_goals_together_are_refused(tmp_path):
+    text = _scenario_text("    - reach: [0.1, 0.5, 0.4]").replace("  goals:", "  goal: [0.1, 0.5, 0.4]\n  goals:")
+    path = tmp_path / "both.yaml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError, match=r"give goal \(one move\) or goals \(several\), not both"):
+        load_scenario(path)
+
+
+# --------------------------------------------------------------------------------------------
+# step B and step C's problem
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def pause_candidate():
+    scenario = load_scenario(PAUSE)
+    composition = Composition.from_name(ROBOT, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    assert verdict.passed, verdict.message
+    spec = next(candidate_specs([verdict]))
+    return scenario, verdict, spec, make_candidate(scenario, spec)
+
+
+def test_step_b_chains_a_return_to_the_start_configuration(pause_candidate):
+    _, verdict, spec, candidate = pause_candidate
+    assert verdict.q_goal == verdict.q_start  # returning to the start is ending where it started
+    assert len(verdict.q_via) == 1 and spec.q_via == verdict.q_via
+    problem = candidate.problem
+    assert problem.phases == 2 and problem.hold == pytest.approx(0.5)
+    robot = problem.robot
+    place = np.asarray(load_scenario(PAUSE).task.goals[0].position)
+    assert np.linalg.norm(robot.tool_position(np.asarray(verdict.q_via[0])) - place) < 1e-3
+
+
+@pytest.mark.parametrize("path", [TWO_GOALS, PAUSE], ids=["two-goals", "pause"])
+def test_phased_jacobian_and_gradient_match_central_differences(path):
+    scenario = load_scenario(path)
+    composition = Composition.from_name(ROBOT, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    problem = make_candidate(scenario, next(candidate_specs([verdict]))).problem
+    rng = np.random.default_rng(3)
+    y = problem.initial_guess() + 0.02 * rng.standard_normal(problem.n_variables)
+    evaluation = problem.evaluate(y)
+    jac = evaluation.jacobian.toarray()
+    fd = central_difference(problem.constraints, y)
+    err = row_relative_error(jac, fd)
+    assert err.max() < 1e-5, (int(np.argmax(err)), err.max())
+    route_rows = problem.rows_of("route")
+    assert len(route_rows) and np.abs(fd[route_rows]).max() > 0.1  # the check is not vacuous
+    for column in problem.duration_columns:  # every phase's duration moves the motion
+        assert np.abs(fd[:, column]).max() > 1e-2
+    gradient = problem.cost_gradient(y)
+    assert np.allclose(gradient, central_difference(problem.cost, y)[0], atol=1e-7)
+    assert gradient[problem.duration_columns].min() > 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# the solved motion, checked on the plan sampled at a controller's rate
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def solved_pause(pause_candidate):
+    scenario, _, spec, candidate = pause_candidate
+    return scenario, spec, candidate.solve()
+
+
+def _tool(robot, q):
+    return np.array([robot.tool_position(x) for x in np.atleast_2d(q)])
+
+
+def test_a_pause_and_a_return_hold_on_the_sampled_plan(solved_pause):
+    scenario, spec, result = solved_pause
+    assert result.status == "optimal", result.reason
+    assert result.verification is not None and result.verification.passed
+    robot = make_candidate(scenario, spec).problem.robot
+    step = 0.01
+    plan = controller_rate(result.trajectory, robot, 1.0 / step)
+    (arrive, back) = result.stop_times
+    assert 0.0 < arrive < back == pytest.approx(plan.t[-1])
+    assert plan.t[-1] == pytest.approx(result.tf) and result.tf == pytest.approx(result.cost)
+    # at the place position, at rest, for the pause's 0.5 s
+    during = (plan.t >= arrive - 1e-9) & (plan.t <= arrive + 0.5 + 1e-9)
+    assert during.sum() >= 0.5 / step
+    q_place = plan.at(np.array([arrive]))[0][0]
+    assert np.ptp(plan.q[during], axis=0).max() < 1e-9 and np.abs(plan.qd[during]).max() < 1e-9
+    place = np.asarray(scenario.task.goals[0].position)
+    assert np.linalg.norm(_tool(robot, q_place)[0] - place) <= 1e-3 + 1e-6  # step B's IK tolerance
+    # the robot moved in between: the pause is not the whole story
+    assert np.linalg.norm(_tool(robot, plan.q[0])[0] - place) > 0.5
+    # back to the start configuration, at rest, after the pause
+    assert np.abs(plan.q[-1] - plan.q[0]).max() < 1e-6 and np.abs(plan.qd[-1]).max() < 1e-9
+    assert result.cost_bound <= result.cost and result.cost_bound == pytest.approx(cost_bound(scenario, spec))
+    assert result.cost_bound >= 0.5  # the pause counts in the bound
+
+
+def test_an_at_goal_is_passed_moving_and_in_order():
+    scenario = load_scenario(TWO_GOALS)
+    composition = Composition.from_name(ROBOT, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    spec = next(candidate_specs([verdict]))
+    candidate = make_candidate(scenario, spec)
+    result = candidate.solve()
+    assert result.status == "optimal" and result.verification.passed, result.reason
+    robot = candidate.problem.robot
+    (through, end) = result.stop_times
+    q, qd, _ = result.trajectory.at(np.array([through]))
+    waypoint, goal = scenario.task.goals
+    assert np.linalg.norm(_tool(robot, q)[0] - np.asarray(waypoint.position)) <= waypoint.tolerance + 1e-6
+    assert np.abs(qd).max() > 0.1  # passed moving: an at goal does not stop the robot
+    assert end == pytest.approx(result.tf)
+    assert np.linalg.norm(_tool(robot, result.trajectory.q[-1])[0] - np.asarray(goal.position)) < 1e-3 + 1e-6
+    # the tool is nearer the waypoint at its instant than anywhere in the second move
+    later = result.trajectory.t > through + 0.05
+    dist = np.linalg.norm(_tool(robot, result.trajectory.q[later]) - np.asarray(waypoint.position), axis=1)
+    assert dist.min() > np.linalg.norm(_tool(robot, q)[0] - np.asarray(waypoint.position))
+    # the tool frame is Pinocchio's tool0 (the check above does not lean on the solver's rows)
+    model, data = robot.model, robot.data
+    pin.framesForwardKinematics(model, data, q[0])
+    assert np.allclose(data.oMf[robot.tool_frame_id].translation, _tool(robot, q)[0])
+    assert math.isfinite(result.cost_bound) and result.cost_bound < result.cost
