@@ -36,6 +36,7 @@ from .cli_output import (
     survivor_table,
     written_files,
 )
+from .cobra import import_cobra
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InfeasibleError, InputError, shorten
 from .execution import make_engine
@@ -183,6 +184,52 @@ def import_timor_command(modules_json: Path, overrides: Path | None, output: Pat
     for line in result.collision:
         click.echo(f"collision: {line}")
     click.echo(f"wrote {output} ({len(result.data['modules'])} modules)")
+
+
+@main.command("import-cobra")
+@click.argument("task_json", type=existing_file, metavar="TASK_JSON")
+@click.option(
+    "--catalog",
+    type=existing_file,
+    required=True,
+    help="Catalogue the scenario uses (its path is written relative to the scenario).",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=str,
+    callback=file_name("scenario"),
+    required=True,
+    help="Scenario to write (its meshes beside it, in meshes/).",
+)
+@click.option(
+    "--cost",
+    default="cyc",
+    show_default=True,
+    help="CoBRA cost descriptor: cyc, mechEnergy, mass, numJ, or weighted, e.g. cyc_2,mass_0.1.",
+)
+@click.option(
+    "--payload", type=click.FloatRange(min=0.0), default=0.0, show_default=True, help="Payload at the tool [kg]."
+)
+@click.option(
+    "--max-time",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Longest motion [s] (needed for mechEnergy alone).",
+)
+@user_errors
+def import_cobra_command(
+    task_json: Path, catalog: Path, output: Path, cost: str, payload: float, max_time: float | None
+) -> None:
+    """Convert a CoBRA task (JSON) to a scenario YAML for a catalogue."""
+    distinct_files([("-o", output)], [("TASK_JSON", task_json), ("--catalog", catalog)])
+    imported = import_cobra(task_json, catalog, output, cost, payload, max_time)
+    imported.write(output)
+    scenario = load_scenario(output)  # what was written reads back (every check of the reader)
+    goals = len(scenario.task.goals) + 1
+    click.echo(
+        f"wrote {output} ({goals} goals, {len(scenario.task.obstacles)} obstacles, {len(imported.meshes)} meshes)"
+    )
 
 
 @main.command("filter")

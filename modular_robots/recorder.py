@@ -19,6 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
+from .cobra_solution import COBRA_SOLUTION, write_cobra_solution
 from .collision import Approach
 from .exceptions import ResultsFolderError, Terminated, shorten
 from .execution import terminations_raise
@@ -149,7 +150,7 @@ class RunRecorder:
         files = WinnerFiles()
         if self.path is not None:
             start = time.perf_counter()
-            before = _identities(self.path, (*WINNER_FILES, VIEWER, *_mesh_copies(self.path)))
+            before = _identities(self.path, (*WINNER_FILES, VIEWER, COBRA_SOLUTION, *_mesh_copies(self.path)))
             try:
                 files = write_winner_files(self.path, winner)
                 if pruning_plot_title is not None:
@@ -158,6 +159,11 @@ class RunRecorder:
                 self.winner = winner_json(winner, files, tracking, approach)
                 self._write()  # the page is drawn from the folder's files, result.json included
                 files = replace(files, viewer=write_page(self.path))
+                if self.scenario.cobra is not None:
+                    solution = write_cobra_solution(self.path, self.scenario, winner, time.perf_counter() - self._start)
+                    files = replace(files, cobra_solution=solution)
+                    self.winner = winner_json(winner, files, tracking, approach)
+                    self._write()
             except BaseException:  # no winner file without a result.json that names it
                 assert self._folder is not None  # made whenever self.path is given
                 self.winner = None

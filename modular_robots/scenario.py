@@ -25,6 +25,7 @@ __all__ = [
     "PruningSettings",
     "ExecutionSettings",
     "Scenario",
+    "CobraOrigin",
     "load_scenario",
 ]
 
@@ -172,6 +173,20 @@ class PruningSettings:
 
 
 @dataclass(frozen=True)
+class CobraOrigin:
+    """Where a scenario came from, for its solution document: the CoBRA task's ``id`` and
+    ``version``, its ``time_step`` [s], the robot's ``base_pose`` in the world (4x4), the ``start``
+    goal (the CoBRA goal the scenario's start stands for) and the ``cost_function`` descriptor."""
+
+    id: str
+    version: str
+    time_step: float
+    base_pose: tuple[tuple[float, ...], ...]
+    start: str
+    cost_function: str
+
+
+@dataclass(frozen=True)
 class Scenario:
     name: str
     catalog: Catalog
@@ -181,6 +196,8 @@ class Scenario:
     path: Path | None = None
     #: Where steps B-D run (``execution: {engine, address, connect_timeout}``; the command line overrides it).
     execution: ExecutionSettings = field(default_factory=ExecutionSettings)
+    #: The CoBRA task the scenario was imported from (None: not imported).
+    cobra: CobraOrigin | None = None
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -230,8 +247,42 @@ def _scenario_from_fields(top: Fields) -> Scenario:
     optimizer = _read_optimizer(top.mapping("optimizer", default=None))
     pruning = _read_pruning(top.mapping("pruning", default=None))
     execution = _read_execution(top.mapping("execution", default=None))
+    cobra = _read_cobra(top.mapping("cobra", default=None), task)
     top.done()
-    return Scenario(name, catalog, task, optimizer, pruning, path, execution)
+    return Scenario(name, catalog, task, optimizer, pruning, path, execution, cobra)
+
+
+def _read_cobra(f: Fields | None, task: Task) -> CobraOrigin | None:
+    """``cobra``: where a scenario written by ``import-cobra`` came from
+    (:class:`~modular_robots.cobra.CobraOrigin`), for its solution document."""
+    if f is None:
+        return None
+    f.string("task", default="")
+    origin = CobraOrigin(
+        id=f.string("id"),
+        version=str(f.raw("version", "2022")),
+        time_step=f.number("time_step", exclusive_minimum=0.0, maximum=1.0),
+        base_pose=_pose_rows(f),
+        start=str(f.raw("start")),
+        cost_function=f.string("cost_function", default="cyc"),
+    )
+    ids = {g.id for g in task.goals}
+    f.check("start", origin.start not in ids, f"the start's goal id {shorten(origin.start)} is also a goal's")
+    f.done()
+    return origin
+
+
+def _pose_rows(f: Fields) -> tuple[tuple[float, ...], ...]:
+    """``cobra.base_pose``: a 4x4 homogeneous transform, by rows."""
+    rows = f.raw("base_pose")
+    ok = (
+        isinstance(rows, list)
+        and len(rows) == 4
+        and all(isinstance(r, list) and len(r) == 4 for r in rows)
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for r in rows for v in r)
+    )
+    f.check("base_pose", ok, "expected a 4x4 matrix of finite numbers (rows)")
+    return tuple(tuple(float(v) for v in r) for r in rows)
 
 
 def _below(value: float, limit: float) -> str:
@@ -350,7 +401,7 @@ def _read_goals(f: Fields, start: tuple[float, float, float]) -> tuple[Goal, ...
         if kind != "pause":
             item.check(
                 kind,
-                math.dist(previous, position) >= MIN_TRAVEL * (1.0 - 1e-9),
+                kind == "return" or math.dist(previous, position) >= MIN_TRAVEL * (1.0 - 1e-9),
                 f"the goal is {_below(math.dist(previous, position) * 1000, MIN_TRAVEL * 1000)} mm from the one "
                 f"before; expected at least {MIN_TRAVEL * 1000:g} mm (a move moves the payload)",
             )

@@ -42,6 +42,8 @@ class WinnerFiles:
     joints_plot: str | None = None
     pruning_plot: str | None = None
     viewer: str | None = None
+    #: The CoBRA solution document, for a scenario imported from a CoBRA task.
+    cobra_solution: str | None = None
 
     def by_kind(self) -> dict[str, str]:
         """The written files' names by kind, in the order a run writes them."""

@@ -1,0 +1,303 @@
+"""CoBRA tasks in (``import-cobra``) and solutions out (``cobra-solution.json``).
+
+References used here:
+
+* the CoBRA task files themselves (``scenarios/cobra/tasks``, from ``../shared/cobra``): the
+  imported scenario's poses, moved back by the task's base placement, are the file's world poses;
+* the goals and constraints of a solution checked as CoBRA's checker defines them (Timor's
+  ``Goals`` and ``Constraints``), on the document's rows alone, with Pinocchio's kinematics of the
+  winner's URDF placed at the document's ``basePose``: the tool's position within ``r_sph`` and
+  its rotation within ``Theta_R`` of each goal's nominal world pose at its instant, the tool's
+  spatial velocity within 1e-3 at a ``reach``, the rows constant and at rest over a ``pause``,
+  ``q``, ``dq``, ``ddq`` within 1e-4 of the start's at a ``returnTo``, the goals in order, the
+  joint limits at every row, the rows at most ``timeStepSize`` apart.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from click.testing import CliRunner
+
+from modular_robots.cli import main
+from modular_robots.cobra import cobra_cost, import_cobra
+from modular_robots.cobra_solution import COBRA_SOLUTION, cobra_solution, sample_times
+from modular_robots.composition import Composition
+from modular_robots.exceptions import ScenarioError
+from modular_robots.feasibility import check_composition
+from modular_robots.ocp.candidate import make_candidate
+from modular_robots.pipeline import candidate_specs
+from modular_robots.robot import robot_from_urdf
+from modular_robots.scenario import load_scenario
+
+from .helpers.paths import ROOT
+
+TASKS = ROOT / "scenarios" / "cobra" / "tasks"
+IMPROV_4DOF = ROOT / "scenarios" / "catalogs" / "improv-4dof.yaml"
+IMPROV_6DOF = ROOT / "scenarios" / "catalogs" / "improv-6dof.yaml"
+ROBOT = "base-PB21-L1-PB23-L4-L3"
+
+
+def _world(scenario, position) -> np.ndarray:
+    base = np.array(scenario.cobra.base_pose)
+    return base[:3, :3] @ np.asarray(position) + base[:3, 3]
+
+
+@pytest.mark.parametrize("name", ["PTP_1", "PTP_2", "PTP_3", "PTP_pause", "PTP_2_cycle"])
+def test_the_samples_import_with_their_poses_in_the_base_frame(tmp_path, name):
+    task = json.loads((TASKS / f"{name}.json").read_text())
+    out = tmp_path / "scenario.yaml"
+    import_cobra(TASKS / f"{name}.json", IMPROV_6DOF, out).write(out)
+    scenario = load_scenario(out)
+    goals = task["goals"]
+    assert scenario.cobra.id == task["header"]["ID"] and scenario.cobra.start == goals[0]["ID"]
+    assert [g.id for g in scenario.task.goals] == [g["ID"] for g in goals[1:]]
+    nominal = np.array(goals[0]["goalPose"]["nominal"])
+    assert np.allclose(_world(scenario, scenario.task.start), nominal[:3, 3], atol=1e-12)
+    for goal, read in zip(goals[1:], scenario.task.goals):
+        assert read.kind == {"reach": "reach", "at": "at", "pause": "pause", "returnTo": "return"}[goal["type"]]
+        if read.position is not None:
+            world = np.array(goal["goalPose"]["nominal"])
+            assert np.allclose(_world(scenario, read.position), world[:3, 3], atol=1e-12)
+            base = np.array(scenario.cobra.base_pose)[:3, :3]
+            assert np.allclose(base @ read.orientation.rotation, world[:3, :3], atol=1e-9)
+            assert read.tolerance == goal["goalPose"]["tolerance"][0][1]
+            assert read.orientation.tolerance == goal["goalPose"]["tolerance"][1][1]
+    meshes = [o for o in scenario.task.obstacles if o.kind == "mesh"]
+    assert len(meshes) == len(task["obstacles"])  # every sample's obstacle is one collision mesh
+    assert scenario.task.floor is None and scenario.task.self_collision
+
+
+def test_a_base_placement_moves_every_pose(tmp_path):
+    out = tmp_path / "ptp1.yaml"
+    import_cobra(TASKS / "PTP_1.json", IMPROV_6DOF, out).write(out)
+    scenario = load_scenario(out)
+    assert scenario.task.start == (0.0, -1.0, 0.0)  # world (1, 1, 3), base at (1, 2, 3)
+    assert scenario.task.goals[0].position == (1.0, 0.0, 0.0)
+    assert scenario.task.goals[0].kind == "reach" and scenario.cobra.start == "1"
+
+
+def _task(goals, obstacles=(), base=None, constraints=None) -> dict:
+    return {
+        "header": {"ID": "test/t", "version": "2022", "taskName": "t", "timeStepSize": 0.01, "gravity": [0, 0, -9.81]},
+        "obstacles": list(obstacles),
+        "constraints": constraints
+        if constraints is not None
+        else [
+            {"type": "joint", "parts": ["q", "dq", "tau"]},
+            {"type": "collisionFree"},
+            {"type": "basePlacement", "pose": {"nominal": base if base is not None else np.eye(4).tolist()}},
+        ],
+        "goals": list(goals),
+    }
+
+
+def _pose(x, y, z, r=0.01):
+    return {
+        "nominal": [[1, 0, 0, x], [0, 1, 0, y], [0, 0, 1, z], [0, 0, 0, 1]],
+        "toleranceProjection": ["r_sph"],
+        "tolerance": [[0, r]],
+    }
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (
+            lambda t: t["goals"].append({"ID": "9", "type": "follow"}),
+            "goals[2] (ID '9'): the goal type 'follow' is not supported",
+        ),
+        (
+            lambda t: t["goals"].append({"ID": "9", "type": "returnTo", "returnToGoal": "7"}),
+            "returnToGoal: no earlier goal with ID '7'",
+        ),
+        (
+            lambda t: t["goals"][1]["goalPose"].update(toleranceProjection=["N_z"]),
+            "toleranceProjection 'N_z' is not supported",
+        ),
+        (
+            lambda t: t["goals"][1]["goalPose"].update(toleranceProjection=["Theta_R"], tolerance=[[0, 0.1]]),
+            "no position tolerance",
+        ),
+        (lambda t: t["goals"][1]["goalPose"].update(nominalParent="frame"), "poses in other frames are not supported"),
+        (lambda t: t["goals"].pop(), "expected at least two"),
+        (lambda t: t["header"].update(gravity=[0, 0, -3.7]), "header.gravity"),
+        (
+            lambda t: t["constraints"][2]["pose"].update(
+                nominal=[[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]]
+            ),
+            "a tilted base",
+        ),
+        (
+            lambda t: t["obstacles"].append(
+                {
+                    "collision": [
+                        {
+                            "type": "mesh",
+                            "pose": np.eye(4).tolist(),
+                            "parameters": {"file": "../../../etc/passwd", "scale": 1},
+                        }
+                    ]
+                }
+            ),
+            "is not a file inside the task's folder",
+        ),
+        (lambda t: t["constraints"].append({"type": "endEffector"}), "the constraint 'endeffector' is not supported"),
+    ],
+)
+def test_bad_tasks_are_refused_naming_the_item(tmp_path, change, words):
+    task = _task(
+        [
+            {"ID": "1", "type": "reach", "goalPose": _pose(0.4, 0.2, 0.3)},
+            {"ID": "2", "type": "reach", "goalPose": _pose(0.1, 0.4, 0.3)},
+        ]
+    )
+    change(task)
+    (tmp_path / "tasks").mkdir()
+    path = tmp_path / "tasks" / "t.json"
+    path.write_text(json.dumps(task))
+    with pytest.raises(ScenarioError) as error:
+        import_cobra(path, IMPROV_4DOF, tmp_path / "s.yaml")
+    assert str(path) in str(error.value) and words in str(error.value), str(error.value)
+
+
+def test_cost_descriptors_map_and_typos_are_named():
+    assert cobra_cost("cyc") == "time"
+    assert cobra_cost("cyc_2,mass_0.1") == "2*time + 0.1*mass"
+    assert cobra_cost("mechEnergy,numJ_0.5") == "energy + 0.5*joints"
+    with pytest.raises(ScenarioError, match="unknown CoBRA cost 'cycc'"):
+        cobra_cost("cycc")
+    with pytest.raises(ScenarioError, match="'effort' is not supported: CoBRA's effort is the sum of"):
+        cobra_cost("effort")
+    with pytest.raises(ScenarioError, match="the weight of 'mass' must be a positive number"):
+        cobra_cost("mass_-1")
+
+
+def test_the_command_writes_a_scenario_that_runs_reads_back(tmp_path):
+    out = tmp_path / "cell" / "pause.yaml"
+    result = CliRunner().invoke(
+        main, ["import-cobra", str(TASKS / "PTP_pause.json"), "--catalog", str(IMPROV_6DOF), "-o", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "3 goals, 1 obstacles, 1 meshes" in result.output
+    assert (out.parent / "meshes" / "QUASER_MV205_v3_compressed.stl").is_file()
+    bad = CliRunner().invoke(
+        main,
+        ["import-cobra", str(TASKS / "PTP_1.json"), "--catalog", str(IMPROV_6DOF), "-o", str(out), "--cost", "cyk"],
+    )
+    assert bad.exit_code != 0 and "unknown CoBRA cost 'cyk'" in bad.output
+
+
+def test_sample_times_keep_every_event_and_the_step():
+    t = sample_times([0.0, 0.0301, 0.5, 0.5000000001, 1.0], 0.01)
+    assert t[0] == 0.0 and t[-1] == 1.0 and np.any(np.isclose(t, 0.0301, rtol=0, atol=1e-15))
+    assert np.diff(t).max() <= 0.01 + 1e-12 and np.diff(t).min() > 1e-6
+
+
+# --------------------------------------------------------------------------------------------
+# a solution, checked as CoBRA's checker does
+# --------------------------------------------------------------------------------------------
+#: A CoBRA task of every goal kind for the 4-joint IMPROV catalogue (position tolerances only:
+#: four joints cannot also hold an orientation), its base placed off the world's origin and
+#: turned about z, so that every pose goes through the change of frame.
+BASE = [[0.0, -1.0, 0.0, 2.0], [1.0, 0.0, 0.0, -1.0], [0.0, 0.0, 1.0, 0.5], [0.0, 0.0, 0.0, 1.0]]
+
+
+def _world_pose(base_position):
+    p = np.array(BASE) @ np.array([*base_position, 1.0])
+    return _pose(*p[:3])
+
+
+@pytest.fixture(scope="module")
+def solved(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cobra") / "tasks"
+    folder.mkdir()
+    goals = [
+        {"ID": "pick", "type": "reach", "goalPose": _world_pose((0.45, 0.25, 0.25))},
+        {"ID": "over", "type": "at", "goalPose": _world_pose((0.1, 0.55, 0.45))},
+        {"ID": "place", "type": "reach", "goalPose": _world_pose((-0.25, 0.45, 0.35))},
+        {"ID": "open", "type": "pause", "duration": 0.3},
+        {"ID": "back", "type": "returnTo"},
+    ]
+    constraints = [
+        {"type": "joint", "parts": ["q", "dq", "tau"]},
+        {"type": "selfCollisionFree"},
+        {"type": "allGoalsFulfilledInOrder", "order": ["pick", "over", "place", "back"]},
+        {"type": "basePlacement", "pose": {"nominal": BASE}},
+    ]
+    task = _task(goals, constraints=constraints)
+    path = folder / "cycle.json"
+    path.write_text(json.dumps(task))
+    out = folder.parent / "cycle.yaml"
+    import_cobra(path, IMPROV_4DOF, out, payload=1.0).write(out)
+    scenario = load_scenario(out)
+    verdict = check_composition(Composition.from_name(ROBOT, scenario.catalog), scenario.catalog, scenario.task)
+    assert verdict.passed, verdict.message
+    result = make_candidate(scenario, next(candidate_specs([verdict]))).solve()
+    assert result.status == "optimal" and result.verification.passed, result.reason
+    robot = robot_from_urdf(result.urdf, result.drive["armature"])
+    return task, scenario, result, cobra_solution(scenario, result, robot, 1.0)
+
+
+def test_a_solution_meets_every_goal_and_constraint_at_its_rows(solved):
+    task, _, result, document = solved
+    assert document["taskID"] == "test/t" and document["costFunction"] == "cyc"
+    assert document["moduleOrder"] == ["1", "21", "4", "23", "6", "12"]  # Timor's ids of base PB21 L1 PB23 L4 L3
+    assert document["moduleSet"] == "IMPROV"
+    traj = document["trajectory"]
+    t, q, dq, ddq, tau = (np.array(traj[k]) for k in ("t", "q", "dq", "ddq", "tau"))
+    assert document["cost"] == pytest.approx(t[-1]) and t[-1] == pytest.approx(result.tf)
+    assert np.all(np.diff(t) > 0) and np.diff(t).max() <= task["header"]["timeStepSize"] + 1e-9
+    robot = robot_from_urdf(result.urdf, result.drive["armature"])
+    model, data, frame = robot.model, robot.data, robot.tool_frame_id
+    base = pin.SE3(np.array(document["basePose"][0]))
+    times = traj["goal2time"]
+    row = {}
+    for gid, when in times.items():
+        hits = np.flatnonzero(np.isclose(t, when))  # CoBRA's own lookup: exactly one row
+        assert len(hits) == 1, (gid, when)
+        row[gid] = int(hits[0])
+    for goal in task["goals"]:
+        k = row[goal["ID"]]
+        if goal["type"] in ("at", "reach"):
+            pin.framesForwardKinematics(model, data, q[k])
+            tool = base * data.oMf[frame]
+            nominal = np.array(goal["goalPose"]["nominal"])
+            assert np.linalg.norm(tool.translation - nominal[:3, 3]) <= goal["goalPose"]["tolerance"][0][1] + 1e-12
+        if goal["type"] == "reach":
+            velocity = pin.computeFrameJacobian(model, data, q[k], frame, pin.LOCAL_WORLD_ALIGNED) @ dq[k]
+            assert np.abs(velocity).max() <= 1e-3
+        if goal["type"] == "at":
+            assert np.abs(dq[k]).max() > 0.05  # passed moving
+        if goal["type"] == "pause":
+            first = int(np.flatnonzero(t <= t[k] - goal["duration"] + 1e-9)[-1])
+            window = slice(first, k + 1)
+            assert k - first >= goal["duration"] / 0.01 - 1
+            assert not np.any(q[window] != q[first]) and not dq[window].any() and not ddq[window].any()
+        if goal["type"] == "returnTo":
+            for values in (q, dq, ddq):
+                assert np.linalg.norm(values[k] - values[0]) <= 1e-4
+    order = [times[g] for g in ("pick", "over", "place", "back")]
+    assert order == sorted(order) and times["pick"] == 0.0 and times["open"] == pytest.approx(times["place"] + 0.3)
+    # the joint constraint: position, velocity and torque limits at every row
+    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+    assert np.all(q >= lower - 1e-9) and np.all(q <= upper + 1e-9)
+    assert np.all(np.abs(dq) <= model.velocityLimit * (1 + 1e-3))
+    assert np.all(np.abs(tau) <= model.effortLimit * (1 + 1e-3))
+    # the torques are the inverse dynamics of the rows (what CoBRA's checker computes)
+    assert np.allclose(tau, robot.rnea(q, dq, ddq), atol=1e-9)
+
+
+def test_a_run_writes_the_solution_into_its_folder(solved, tmp_path):
+    _, scenario, _, _ = solved
+    result = CliRunner().invoke(
+        main, ["optimize", ROBOT, "--scenario", str(scenario.path), "--out", str(tmp_path / "out")]
+    )
+    assert result.exit_code == 0, result.output
+    document = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert document["winner"]["files"].get("cobra_solution") == COBRA_SOLUTION
+    written = json.loads((tmp_path / "out" / COBRA_SOLUTION).read_text())
+    assert set(written["trajectory"]["goal2time"]) == {"pick", "over", "place", "open", "back"}
