@@ -1,6 +1,6 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
 runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite, timor,
-engines, search, costs). RESULTS.md is rewritten at the end.
+engines, search, costs, goals). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -13,6 +13,7 @@ from . import (
     bench_costs,
     bench_engines,
     bench_feasibility,
+    bench_goals,
     bench_ipopt,
     bench_margins,
     bench_models,
@@ -40,6 +41,7 @@ BENCHES = {
     "engines": bench_engines,
     "search": bench_search,
     "costs": bench_costs,
+    "goals": bench_goals,
 }
 
 with single_threaded_blas():

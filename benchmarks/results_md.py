@@ -312,6 +312,45 @@ def _costs_lines() -> list[str]:
     ]
 
 
+def _goals_lines() -> list[str]:
+    """Tasks of several goals and CoBRA's samples (``bench_goals.py``)."""
+    doc = _load("goals")
+    if not doc:
+        return []
+    lines = [
+        "## Tasks of several goals, and CoBRA's sample tasks",
+        "",
+        _measured(doc)
+        + f" Load average {doc['load_average_before']:.1f} before, {doc['load_average_after']:.1f} after; each row "
+        "one `run` as a whole process on 2 cores (CoBRA's tasks after `import-cobra`; the Science2019 space by the "
+        "best-first search within 900 s).",
+        "",
+        "| task | catalogue | feasible | verified / candidates | wall s | winner | cycle time s | moves end at s | "
+        "CoBRA check | why no winner |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in doc["rows"]:
+        stops = ", ".join(f"{t:.3f}" for t in r["stop_times"]) if r.get("stop_times") else "-"
+        check = r.get("cobra_check") or "-"
+        if check == "passed":
+            error, angle = r["largest_position_error_m"], r["largest_angle_rad"]
+            check = f"passed ({r['rows']} rows, position {error:.2g} m, angle {angle:.2g} rad)"
+        lines.append(
+            f"| {r['task']} | {r['catalog']} | {r['feasible'] if r['feasible'] is not None else '-'} | "
+            f"{r['verified']} / {r['candidates']} | {_fmt(r['wall_s'])} | {r['winner'] or '-'} | "
+            f"{_fmt(r['cycle_s'], 4) if r['cycle_s'] is not None else '-'} | {stops} | {check} | "
+            f"{r['why_none'] or ''} |"
+        )
+    return lines + [
+        "",
+        "The cycle time counts the pauses. `CoBRA check`: the run's `cobra-solution.json` checked as CoBRA's checker "
+        "defines its goals and constraints, on its rows alone (`tests/helpers/cobra_check.py`): every goal's pose "
+        "within `r_sph` and `Theta_R` at its instant, the tool at rest (1e-3) at a `reach`, the pause's rows constant, "
+        "the joint limits at every row, the rows at most `timeStepSize` apart.",
+        "",
+    ]
+
+
 def _engines_lines() -> list[str]:
     """The engines side by side (``bench_engines.py``)."""
     doc = _load("engines")
@@ -533,6 +572,7 @@ def build() -> str:
     lines += _suite_lines()
     lines += _search_lines()
     lines += _costs_lines()
+    lines += _goals_lines()
     lines += _engines_lines()
     margins = _load("margins")
     if margins:

@@ -224,7 +224,7 @@ class ShootingProblem:
         if self.self_collision is not None:
             assert self.self_collision.farthest is not None  # the checked pairs
             self._self_rows = self.self_collision.within(settings.clearance_margin)
-            at_ends = self.self_collision.distances(self._chain())[0].min(axis=0)
+            at_ends = self.self_collision.distances(self.chain())[0].min(axis=0)
             self._self_margins = np.minimum(
                 settings.clearance_margin,
                 0.5 * np.minimum(self.self_collision.farthest, at_ends)[self._self_rows],
@@ -250,7 +250,7 @@ class ShootingProblem:
         #: The joint-space path of the first guess (with several phases: the chain of step B's
         #: configurations, each move walked along its own detour).
         self.waypoints = (
-            (self._chain() if self.phases > 1 else detour_path(robot, self.collision, self.q_start, self.q_goal))
+            (self.chain() if self.phases > 1 else detour_path(robot, self.collision, self.q_start, self.q_goal))
             if waypoints is None
             else np.asarray(waypoints, dtype=float)
         )
@@ -359,6 +359,24 @@ class ShootingProblem:
             self.route,
         )
 
+    def phase_problem(self, q_a: np.ndarray, q_b: np.ndarray) -> ShootingProblem | None:
+        """The single move from rest at ``q_a`` to rest at ``q_b`` on this problem's robot,
+        obstacles and settings, for the least time (None when they are the same configuration):
+        what :class:`~modular_robots.ocp.candidate.Candidate` solves first for each phase."""
+        if np.allclose(q_a, q_b, rtol=0.0, atol=1e-9):
+            return None
+        return ShootingProblem(
+            self.robot,
+            q_a,
+            q_b,
+            self.obstacles,
+            "time",
+            self.settings,
+            self.substeps,
+            None,
+            self.self_collision is not None,
+        )
+
     def refined(self, substeps: int | None = None, waypoints: np.ndarray | None = None) -> ShootingProblem:
         """The same problem with ``substeps`` per interval (decision vectors carry over as they
         are) or with the initial guess along ``waypoints`` (they do not: the scaling follows the
@@ -388,7 +406,7 @@ class ShootingProblem:
             raise ProblemError(f"{label} = {np.round(q, 6).tolist()} is outside the joint limits")
         return q
 
-    def _chain(self) -> np.ndarray:
+    def chain(self) -> np.ndarray:
         """The configurations at the start, at each via (step B's) and at the goal ``(P + 1, nv)``."""
         return np.vstack([self.q_start, *(np.asarray(v.q, dtype=float) for v in self.route.vias), self.q_goal])
 
