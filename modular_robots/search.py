@@ -527,12 +527,13 @@ _SUMMARY_FIELDS = (
 
 
 def _result_json(result: CandidateResult) -> dict:
-    return {name: getattr(result, name) for name in _SUMMARY_FIELDS}
+    return {name: getattr(result, name) for name in (*_SUMMARY_FIELDS, "stop_times")}
 
 
 def _result_from_json(document: dict) -> CandidateResult:
     values = {name: document[name] for name in _SUMMARY_FIELDS}
-    for name in ("cost_history", "violation_history", "refinement_history", "q_start", "q_goal"):
+    values["stop_times"] = document.get("stop_times", ())  # (a record from before several goals has none)
+    for name in ("cost_history", "violation_history", "refinement_history", "q_start", "q_goal", "stop_times"):
         values[name] = tuple(values[name])
     values["status"] = CandidateStatus(values["status"])
     values["boundary_pair"] = BoundaryPair(values["boundary_pair"])

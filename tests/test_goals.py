@@ -243,3 +243,20 @@ def test_an_at_goal_is_passed_moving_and_in_order():
     pin.framesForwardKinematics(model, data, q[0])
     assert np.allclose(data.oMf[robot.tool_frame_id].translation, _tool(robot, q)[0])
     assert math.isfinite(result.cost_bound) and result.cost_bound < result.cost
+
+
+def test_one_reach_goal_is_the_single_move_bit_for_bit(tmp_path):
+    """``goals: [reach: G]`` is ``goal: G``: the same problem, evaluated to the same bits."""
+    listed = _load(tmp_path, "    - reach: [-0.25, 0.45, 0.35]")
+    single = load_scenario(ROOT / "scenarios" / "improv-pick.yaml")
+    task = single.task.__class__(**{**single.task.__dict__, "obstacles": (), "goals": ()})
+    composition = Composition.from_name(ROBOT, listed.catalog)
+    verdict = check_composition(composition, listed.catalog, listed.task)
+    spec = next(candidate_specs([verdict]))
+    one = make_candidate(listed, spec).problem
+    other = make_candidate(listed.__class__(**{**listed.__dict__, "task": task}), spec).problem
+    y = one.initial_guess() + 0.01 * np.random.default_rng(5).standard_normal(one.n_variables)
+    a, b = one.evaluate(y), other.evaluate(y)
+    assert one.phases == other.phases == 1 and one.n_variables == other.n_variables
+    assert np.array_equal(a.constraints, b.constraints) and a.cost == b.cost
+    assert np.array_equal(a.jacobian.toarray(), b.jacobian.toarray())

@@ -369,11 +369,15 @@ def _task(n: Node) -> TaskRecord:
 
 
 def _waypoints(task: Node) -> tuple[tuple[float, ...], ...]:
-    """The positions of a task's goals but the last that has one (``goals``; none for one move)."""
+    """The positions of a task's goals on the way (``goals``; none for one move): each that has
+    one, but the last goal's when the motion ends there (not when it ends with a return)."""
     if not task.has("goals"):
         return ()
-    positions = [g["position"].numbers(size=3) for g in task["goals"].items() if g.has("position")]
-    return tuple(positions[:-1])
+    goals = task["goals"].items()
+    positions = [g["position"].numbers(size=3) for g in goals if g.has("position")]
+    moving = [g for g in goals if g["kind"].string() != "pause"]
+    ends_at_pose = bool(moving) and moving[-1].has("position")
+    return tuple(positions[:-1] if ends_at_pose else positions)
 
 
 def _design_record(n: Node) -> Design:
