@@ -33,7 +33,7 @@ COBRA = ("PTP_1", "PTP_2", "PTP_3", "PTP_pause")
 #: (catalogue, run options): the small space whole, the Science2019 space best-first in a budget.
 CATALOGS = (
     ("improv-6dof", ()),
-    ("improv-science2019", ("--search", "best-first", "--budget", "900")),
+    ("improv-science2019", ("--search", "best-first", "--budget", "720")),
 )
 
 
