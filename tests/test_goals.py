@@ -210,6 +210,11 @@ def test_a_pause_and_a_return_hold_on_the_sampled_plan(solved_pause):
     assert np.ptp(plan.q[during], axis=0).max() < 1e-9 and np.abs(plan.qd[during]).max() < 1e-9
     place = np.asarray(scenario.task.goals[0].position)
     assert np.linalg.norm(_tool(robot, q_place)[0] - place) <= 1e-3 + 1e-6  # step B's IK tolerance
+    # the drives hold the payload through the pause (Pinocchio's gravity torque, not the plan's rows)
+    model, data = robot.model, robot.data
+    holding = pin.computeGeneralizedGravity(model, data, q_place)
+    assert np.all(np.abs(holding) <= 0.9 * robot.effort_limit + 1e-6)  # the plan's effort margin
+    assert np.allclose(plan.tau[during][:-1], holding, atol=1e-6)  # (the last row's drives the move after)
     # the robot moved in between: the pause is not the whole story
     assert np.linalg.norm(_tool(robot, plan.q[0])[0] - place) > 0.5
     # back to the start configuration, at rest, after the pause

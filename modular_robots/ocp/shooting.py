@@ -37,6 +37,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 from scipy import sparse
 
 from ..collision import CollisionModel
@@ -74,7 +75,8 @@ class Evaluation:
 
 @dataclass(frozen=True)
 class _RouteRows:
-    """A group of the route's rows: its ``kind`` (``pose``, ``rest``, ``return`` or ``total``),
+    """A group of the route's rows: its ``kind`` (``pose``, ``rest``, ``hold``: the static torque
+    where the robot stands still, ``return`` or ``total``),
     their bounds and scales, each row's variable columns (-1 where fixed), the via (``node``: 1
     the first, ``phases`` the goal) they hold, the configuration a return returns to (``ref``)
     and the pose's end."""
@@ -751,7 +753,8 @@ class ShootingProblem:
 
     def _route_layout(self) -> list[_RouteRows]:
         """The route's rows in order (module docstring; :class:`~modular_robots.ocp.route.Route`):
-        each via's pose, its zero velocity, its return; the goal's return (unless both ends are
+        each via's pose, its zero velocity, the torque that holds it still through a pause (within
+        the effort bounds), its return; the goal's return (unless both ends are
         the fixed start); the motion's total duration when several phases share ``max_time``."""
         nv, groups = self.nv, []
         q_scale, v_scale = self.x_scale[:nv], self.x_scale[nv:]
@@ -765,6 +768,9 @@ class ShootingProblem:
                 )
             if via.rest:
                 groups.append(_RouteRows("rest", zero, zero, v_scale, [np.array([c]) for c in v_cols], j))
+            if self.route.holds[j] > 0.0:  # standing still there: the drives hold the payload
+                bound = self.effort_bound
+                groups.append(_RouteRows("hold", -bound, bound, self.tau_scale, [q_cols] * nv, j))
             if via.returns_to is not None:
                 ref = self._node_columns(self._via_node(via.returns_to))[0]
                 cols = [np.array([a, b]) for a, b in zip(q_cols, ref)]
@@ -799,6 +805,11 @@ class ShootingProblem:
             elif group.kind == "rest":
                 values.append(nodes[self._via_node(group.node), nv:])
                 data.append(np.ones(nv))
+            elif group.kind == "hold":
+                model, robot_data = self.robot.model, self.robot.data
+                values.append(pin.computeGeneralizedGravity(model, robot_data, node).copy())
+                if derivatives:
+                    data.append(pin.computeGeneralizedGravityDerivatives(model, robot_data, node).ravel())
             elif group.kind == "return":
                 assert group.ref is not None
                 values.append(node - nodes[self._via_node(group.ref), :nv])

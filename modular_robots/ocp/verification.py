@@ -175,6 +175,11 @@ def verify(
     pos_excess = float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span))
     vel_share = np.max(np.abs(v) / vmax, axis=0)
     tau_share = np.max(np.abs(torques) / tmax, axis=0)
+    held = _held(problem, nodes)
+    if len(held):  # the pauses: the drives hold the payload still there
+        tau_share = np.maximum(
+            tau_share, np.max(np.abs(robot.rnea(held, np.zeros_like(held), np.zeros_like(held))) / tmax, axis=0)
+        )
     points = len(states)
     last_node = nodes[N - 1 : N]
     last = _integrate(problem, last_node, controls[N - 1 :], np.zeros(1), last_node, durations[-1] / M, rtol, atol)
@@ -201,6 +206,13 @@ def verify(
         max((tf + problem.hold) / problem.max_time - 1.0, 0.0) if problem.max_time is not None else 0.0,
         goal_excess,
     )
+
+
+def _held(problem: ShootingProblem, nodes: np.ndarray) -> np.ndarray:
+    """The configurations ``(K, nv)`` where the plan stands still for a pause (the start, a via or
+    the goal with a hold)."""
+    at = [0, *(j * problem.phase_intervals for j in range(1, problem.phases)), problem.intervals]
+    return np.array([nodes[k, : problem.nv] for k, hold in zip(at, problem.route.holds) if hold > 0.0])
 
 
 def _goals(problem: ShootingProblem, nodes: np.ndarray) -> tuple[float, float]:
