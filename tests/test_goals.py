@@ -265,3 +265,19 @@ def test_one_reach_goal_is_the_single_move_bit_for_bit(tmp_path):
     assert one.phases == other.phases == 1 and one.n_variables == other.n_variables
     assert np.array_equal(a.constraints, b.constraints) and a.cost == b.cost
     assert np.array_equal(a.jacobian.toarray(), b.jacobian.toarray())
+
+
+def test_the_moves_solved_first_are_yielded_at_the_motions_bound_and_can_be_stopped():
+    """Step D sees the moves' first solves as iterates whose cost is the whole motion's lower
+    bound (never a move's own cost), and a candidate stopped among them ends cleanly."""
+    scenario = load_scenario(TWO_GOALS)
+    composition = Composition.from_name(ROBOT, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    candidate = make_candidate(scenario, next(candidate_specs([verdict])))
+    bound = candidate.problem.cost_bound
+    iterates = candidate.iterate()
+    first = [next(iterates) for _ in range(3)]
+    assert [it.iteration for it in first] == [1, 2, 3]
+    assert all(it.cost == bound == it.cost_bound for it in first) and bound > 0.0
+    candidate.close()
+    assert candidate.result is not None and candidate.result.status == "stopped" and candidate.result.stop_times == ()

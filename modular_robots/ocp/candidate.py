@@ -240,8 +240,8 @@ class Candidate:
         (None: its first guess) and the iterations so far. A stage that ends infeasible is not
         followed: the objective is then solved from its first guess. With several phases, every
         stage starts from the moves solved one at a time (:meth:`_phases_first`)."""
-        final, offset = self.problem, 0
-        y0 = self._phases_first()
+        final = self.problem
+        y0, offset = yield from self._phases_first()
         start = y0
         for cost in continuation(final.objective):
             self.problem = final.with_objective(cost)
@@ -254,7 +254,7 @@ class Candidate:
         self.problem = final
         return y0, offset
 
-    def _phases_first(self) -> np.ndarray | None:
+    def _phases_first(self) -> Generator[Iterate, None, tuple[np.ndarray | None, int]]:
         """With several phases, a first point that keeps every goal's rows: each move solved alone
         for the least time, at rest at both ends, from step B's configuration to the next
         (:meth:`~modular_robots.ocp.shooting.ShootingProblem.phase_problem`), chained (None: one
@@ -262,12 +262,15 @@ class Candidate:
 
         Measured on CoBRA's PTP_3 (6 joints, a machine's mesh, 0.01 rad at the goal in between):
         from the walked first guess, 600 iterations ended infeasible (violation 0.016); the moves
-        alone converge as single moves do. The moves' solves are not yielded: their costs are of
-        one move, which step D must not take for a whole motion's; their time counts in the
-        candidate's seconds."""
-        full = self.problem
+        alone converge as single moves do.
+
+        The moves' iterates are yielded (so that a budget, a stop or step D's lockstep are not held
+        up by them), each with the whole motion's lower bound for its cost (the problem's
+        ``cost_bound``): a move's own cost is not the motion's, and step D takes a bound for no
+        more than what it is. Returns the first point and the iterations so far."""
+        full, offset = self.problem, 0
         if full.phases == 1:
-            return None
+            return None, offset
         durations, nodes, controls = [], [], []
         for k, (a, b) in enumerate(itertools.pairwise(full.chain())):
             phase = full.phase_problem(a, b)
@@ -276,22 +279,30 @@ class Candidate:
                 nodes.append(np.tile(np.concatenate([a, np.zeros(full.nv)]), (full.phase_intervals, 1)))
                 controls.append(np.zeros((full.phase_intervals, full.nv)))
                 continue
-            solver = make_solver(phase.settings.solver, phase, None, jacobian=self.jacobian)
+            self.problem = phase  # (a result taken meanwhile unpacks the move's iterate)
+            solver = make_solver(phase.settings.solver, phase, None, jacobian=self.jacobian, iteration_offset=offset)
             try:
-                for _ in solver.iterate():
-                    pass
+                for it in solver.iterate():
+                    it = replace(it, cost=full.cost_bound, tf=full.time_bound, cost_bound=full.cost_bound)
+                    self.last = it
+                    self.history.append(it.cost)
+                    self.violations.append(it.constraint_violation)
+                    self.refinements.append(0)
+                    yield it
             finally:
                 solver.close()
                 self._seconds += solver.outcome.seconds if solver.outcome else 0.0
+            self.problem = full
+            offset = self.last.iteration if self.last is not None else offset
             final = solver.outcome.final if solver.outcome else None
             if final is None or final.constraint_violation > phase.settings.constraint_tolerance:
-                return None
+                return None, offset
             tf, phase_nodes, phase_controls = phase.unpack(final.y)
             durations.append(tf)
             nodes.append(phase_nodes[:-1])
             controls.append(phase_controls)
         last = np.concatenate([full.chain()[-1], np.zeros(full.nv)])
-        return full.pack(np.array(durations), np.vstack([*nodes, last]), np.vstack(controls))
+        return full.pack(np.array(durations), np.vstack([*nodes, last]), np.vstack(controls)), offset
 
     def _solve_restarting(
         self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int
@@ -307,7 +318,7 @@ class Candidate:
         last, problem = self.last, self.problem
         optimal = status == CandidateStatus.OPTIMAL
         ends = (problem.q_start, problem.q_goal)  # where the plan starts and ends
-        if problem.free_ends is not None and last is not None:
+        if problem.free_ends is not None and last is not None and len(last.y) == problem.n_variables:
             nodes = problem.unpack(last.y)[1][:, : problem.nv]
             ends = (nodes[0], nodes[-1])
         trajectory = None
@@ -334,7 +345,7 @@ class Candidate:
             boundary_pair=self.boundary_pair,
             q_start=tuple(float(v) for v in ends[0]),
             q_goal=tuple(float(v) for v in ends[-1]),
-            stop_times=tuple(map(float, problem.stop_times(last.y))) if last and problem.route.vias else (),
+            stop_times=tuple(map(float, problem.stop_times(last.y))) if last and optimal and problem.route.vias else (),
             y=last.y if last else None,
             waypoints=problem.waypoints,
             trajectory=trajectory,
