@@ -7,7 +7,8 @@ how (``docs/formats.md``, "import-cobra"):
 
 * CoBRA's start is free. The first goal (``at`` or ``reach``) becomes the scenario's start, the
   robot at rest there; the other goals follow in order: ``at``, ``reach``, ``pause``, and
-  ``returnTo`` (to ``returnToGoal``, the start when absent or when it names the first goal).
+  ``returnTo`` (to ``returnToGoal``, the start when absent, null or naming the first goal; a
+  pause's ID stands for the goal the robot pauses at).
 * A tolerated pose's ``r_sph`` (``[0, r]``) is the position tolerance, ``Theta_R`` (``[0, a]``)
   the angle tolerance about the nominal orientation; ``x``, ``y``, ``z`` bounds symmetric about 0
   give the ball inside them (stricter than the box: a plan within it meets the task). Any other
@@ -18,7 +19,8 @@ how (``docs/formats.md``, "import-cobra"):
   torque); there is no floor (the task's world is its obstacles).
 * A mesh is copied beside the scenario; a mesh path outside the task's folder is refused.
 * The cost: a CoBRA descriptor (``cyc``, ``mechEnergy``, ``mass``, ``numJ`` and weighted sums such
-  as ``cyc_2,mass_0.1``) becomes the scenario's cost (time, energy, mass, joints).
+  as ``cyc_2,mass_0.1``) becomes the scenario's cost (time, energy, mass, joints); a name without
+  a weight has Timor's default (``mass`` 0.05, ``numJ`` 0.1, the others 1).
 
 The scenario's ``cobra`` block keeps what a solution document needs
 (:mod:`~modular_robots.cobra_solution`): the task's ID and version, its time step, the base pose
@@ -43,10 +45,12 @@ from ._yamlio import MAX_FILE_BYTES
 from .exceptions import ScenarioError, shorten
 from .urdf_assembly import rpy_from_matrix
 
-__all__ = ["CobraImport", "import_cobra", "COBRA_COSTS", "cobra_cost"]
+__all__ = ["CobraImport", "import_cobra", "COBRA_COSTS", "COBRA_DEFAULT_WEIGHTS", "cobra_cost", "cobra_terms"]
 
 #: CoBRA's cost abbreviations and the scenario's costs they are (Timor's ``CostFunctions``).
 COBRA_COSTS = {"cyc": "time", "mechEnergy": "energy", "mass": "mass", "numJ": "joints"}
+#: The weight of a cost named without one (Timor's ``default_weight``: ``mass`` is ``mass_0.05``).
+COBRA_DEFAULT_WEIGHTS = {"cyc": 1.0, "mechEnergy": 1.0, "mass": 0.05, "numJ": 0.1}
 #: CoBRA costs with no counterpart here, and why.
 _UNSUPPORTED_COSTS = {
     "effort": "CoBRA's effort is the sum of |tau| over the samples, not the integral of squared relative torques",
@@ -81,9 +85,10 @@ class CobraImport:
         path.write_text(self.text, encoding="utf-8")
 
 
-def cobra_cost(descriptor: str) -> str:
-    """The scenario's cost descriptor for CoBRA's ``descriptor`` (e.g. ``cyc_2,mass_0.1`` ->
-    ``2*time + 0.1*mass``); raises ScenarioError naming an unknown or unsupported cost."""
+def cobra_terms(descriptor: str) -> list[tuple[str, float]]:
+    """The terms of CoBRA's cost ``descriptor``, ``(abbreviation, weight)`` in order: comma-separated
+    ``name`` or ``name_weight``, a name without a weight at Timor's default weight
+    (:data:`COBRA_DEFAULT_WEIGHTS`); raises ScenarioError naming an unknown or unsupported cost."""
     terms = []
     for part in descriptor.split(","):
         name, _, weight = part.strip().partition("_")
@@ -95,13 +100,23 @@ def cobra_cost(descriptor: str) -> str:
                 f"(weighted: name_weight, comma-separated, e.g. cyc_2,mass_0.1)"
             )
         try:
-            value = float(weight) if weight else 1.0
+            value = float(weight) if weight else COBRA_DEFAULT_WEIGHTS[name]
         except ValueError:
             raise ScenarioError(f"--cost: the weight of {shorten(name)} is not a number: {shorten(weight)}") from None
         if not (math.isfinite(value) and value > 0.0):
             raise ScenarioError(f"--cost: the weight of {shorten(name)} must be a positive number, got {weight}")
-        terms.append(COBRA_COSTS[name] if value == 1.0 else f"{value:g}*{COBRA_COSTS[name]}")
-    return " + ".join(terms)
+        terms.append((name, value))
+    return terms
+
+
+def cobra_cost(descriptor: str) -> str:
+    """The scenario's cost descriptor for CoBRA's ``descriptor`` (e.g. ``cyc_2,mass_0.1`` ->
+    ``2*time + 0.1*mass``, ``cyc,numJ`` -> ``time + 0.1*joints``); raises ScenarioError naming an
+    unknown or unsupported cost."""
+    return " + ".join(
+        COBRA_COSTS[name] if weight == 1.0 else f"{weight:g}*{COBRA_COSTS[name]}"
+        for name, weight in cobra_terms(descriptor)
+    )
 
 
 def import_cobra(
@@ -224,6 +239,7 @@ def _goals(goals: list, to_base: np.ndarray, where: str) -> tuple[list[dict], An
     first_id = ""
     start: Any = None
     seen: set[str] = set()
+    where_paused: dict[str, str] = {}  # a pause's ID -> the goal it stands still at
     for i, goal in enumerate(goals):
         label = f"{where}: goals[{i}]"
         _expect(isinstance(goal, dict), label, "expected an object")
@@ -244,9 +260,12 @@ def _goals(goals: list, to_base: np.ndarray, where: str) -> tuple[list[dict], An
             duration = _number(goal.get("duration"), f"{label}: duration")
             _expect(duration > 0.0, label, f"duration: expected a positive number of seconds, got {duration}")
             out.append({"pause": duration, "id": gid})
+            where_paused[gid] = next((str(g["id"]) for g in reversed(out) if "pause" not in g), first_id)
         else:
-            back = str(goal.get("returnToGoal", first_id))
+            named = goal.get("returnToGoal")
+            back = first_id if named is None else str(named)
             _expect(back in seen, label, f"returnToGoal: no earlier goal with ID {shorten(back)}")
+            back = where_paused.get(back, back)
             out.append({"return": "start" if back == first_id else back, "id": gid})
         seen.add(gid)
     return out, start, first_id

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .cobra import cobra_terms
 from .folder import atomic_write
 from .goals import stops_of
 from .plan.candidate import CandidateResult
@@ -150,18 +151,15 @@ def _design(scenario: Scenario, result: CandidateResult) -> tuple[float, int]:
 def _cobra_cost(descriptor: str, t: np.ndarray, dq: np.ndarray, tau: np.ndarray, design: tuple[float, int]) -> float:
     """CoBRA's cost ``descriptor`` (Timor's ``CostFunctions``) of the rows: ``cyc`` the last
     ``t``; ``mechEnergy`` the sum over the rows but the last of ``|tau . dq| dt``; ``mass`` the
-    robot's; ``numJ`` its joints; ``name_weight`` terms summed."""
+    robot's; ``numJ`` its joints; the terms weighted as :func:`~modular_robots.cobra.cobra_terms` reads them,
+    summed."""
     values = {
         "cyc": float(t[-1]),
         "mechEnergy": float(np.sum(np.abs(np.einsum("ij,ij->i", tau[:-1], dq[:-1])) * np.diff(t))),
         "mass": design[0],
         "numJ": float(design[1]),
     }
-    total = 0.0
-    for part in descriptor.split(","):
-        name, _, weight = part.strip().partition("_")
-        total += (float(weight) if weight else 1.0) * values[name]
-    return total
+    return math.fsum(weight * values[name] for name, weight in cobra_terms(descriptor))
 
 
 def write_cobra_solution(folder: Path, scenario: Scenario, result: CandidateResult, seconds: float = -1.0) -> str:

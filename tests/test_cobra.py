@@ -15,10 +15,13 @@ References used here:
 
 from __future__ import annotations
 
+import io
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
+import yourdfpy
 from click.testing import CliRunner
 
 from modular_robots.cli import main
@@ -164,10 +167,37 @@ def test_bad_tasks_are_refused_naming_the_item(tmp_path, change, words):
     assert str(path) in str(error.value) and words in str(error.value), str(error.value)
 
 
+def test_a_return_to_null_or_to_a_pause_goes_where_the_robot_stood(tmp_path):
+    """``returnToGoal: null`` is the start; a pause's ID is the goal the robot paused at."""
+    task = _task(
+        [
+            {"ID": "1", "type": "reach", "goalPose": _pose(0.4, 0.2, 0.3)},
+            {"ID": "2", "type": "at", "goalPose": _pose(0.1, 0.4, 0.3)},
+            {"ID": "wait", "type": "pause", "duration": 0.2},
+            {"ID": "3", "type": "reach", "goalPose": _pose(-0.2, 0.4, 0.3)},
+            {"ID": "4", "type": "returnTo", "returnToGoal": "wait"},
+            {"ID": "5", "type": "returnTo", "returnToGoal": None},
+        ]
+    )
+    (tmp_path / "tasks").mkdir()
+    path = tmp_path / "tasks" / "t.json"
+    path.write_text(json.dumps(task))
+    out = tmp_path / "s.yaml"
+    import_cobra(path, IMPROV_4DOF, out).write(out)
+    goals = load_scenario(out).task.goals
+    assert [(g.id, g.kind, g.to) for g in goals if g.kind == "return"] == [
+        ("4", "return", "2"),
+        ("5", "return", "start"),
+    ]
+
+
 def test_cost_descriptors_map_and_typos_are_named():
     assert cobra_cost("cyc") == "time"
     assert cobra_cost("cyc_2,mass_0.1") == "2*time + 0.1*mass"
     assert cobra_cost("mechEnergy,numJ_0.5") == "energy + 0.5*joints"
+    # a cost named without a weight has Timor's default weight (CostFunctions' default_weight)
+    assert cobra_cost("cyc,mass") == "time + 0.05*mass"
+    assert cobra_cost("numJ") == "0.1*joints"
     with pytest.raises(ScenarioError, match="unknown CoBRA cost 'cycc'"):
         cobra_cost("cycc")
     with pytest.raises(ScenarioError, match="'effort' is not supported: CoBRA's effort is the sum of"):
@@ -255,6 +285,20 @@ def test_a_solution_meets_every_goal_and_constraint_at_its_rows(solved):
     assert times["open"] == pytest.approx(times["place"] + 0.3)
     over = int(np.flatnonzero(np.isclose(t, times["over"]))[0])
     assert np.abs(np.array(document["trajectory"]["dq"][over])).max() > 0.05  # an at goal is passed moving
+
+
+def test_a_weighted_cost_is_scored_with_timors_default_weights(solved):
+    """``cyc,mass,numJ`` is the cycle time plus 0.05 kg^-1 of the robot's mass plus 0.1 per joint
+    (Timor's ``default_weight``), the mass summed from the URDF's links without the payload."""
+    _, scenario, result, _ = solved
+    robot = robot_from_urdf(result.urdf, result.drive["armature"])
+    weighted = replace(scenario, cobra=replace(scenario.cobra, cost_function="cyc,mass,numJ"))
+    scored = cobra_solution(weighted, result, robot, 1.0)
+    links = yourdfpy.URDF.load(io.StringIO(result.urdf), build_scene_graph=False, load_meshes=False).robot.links
+    mass = sum(link.inertial.mass for link in links if link.inertial is not None) - scenario.task.payload
+    t_end = scored["trajectory"]["t"][-1]
+    assert scored["cost"] == pytest.approx(t_end + 0.05 * mass + 0.1 * robot.nv, rel=1e-9)
+    assert scored["costFunction"] == "cyc,mass,numJ" and mass > 1.0
 
 
 def test_a_run_writes_the_solution_into_its_folder(solved, tmp_path):
