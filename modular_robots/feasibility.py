@@ -43,7 +43,7 @@ from .collision import CollisionModel
 from .composition import Composition, count_compositions, enumerate_compositions
 from .exceptions import InputError, shorten
 from .execution import Engine, make_engine
-from .goals import stops_of
+from .goals import START, stops_of
 from .ik import DEFAULT_TOLERANCE, IKResult, distinct, ik_seeds, solve_position_ik_batch
 from .obstacles import obstacle_label
 from .orientation import Orientation
@@ -348,14 +348,19 @@ class _End(NamedTuple):
 
 def _ends(task: Task, settings: FeasibilitySettings) -> dict[str, _End]:
     """The task's start and goals, by label (:attr:`~modular_robots.scenario.Task.targets`), with
-    the task's tolerances or else the settings'."""
+    the task's tolerances or else the settings', at rest where the motion stops
+    (:func:`~modular_robots.goals.stops_of`: an ``at`` goal is passed moving unless a pause
+    follows it, it ends the motion, or a return comes back to its configuration to stop there)."""
+    _, stops = stops_of(task.route)
+    resting = {START} | {task.route[stop.goal].id for stop in stops if stop.rest}
+    resting |= {str(goal.to) for goal in task.route if goal.kind == "return"}
     return {
         label: _End(
             np.asarray(goal.position, dtype=float),
             goal.orientation,
             goal.tolerance or settings.tolerance,
             goal.tolerance or 0.0,
-            goal.kind != "at",
+            goal.id in resting,
         )
         for label, goal in task.targets
     }

@@ -336,6 +336,9 @@ def _read_task(f: Fields) -> Task:
             "the payload without doing work), and step C would crawl toward an ever longer move; add "
             "task.max_time [s], or add the time to the sum (e.g. time + 0.01*energy)",
         )
+    paused = math.fsum(g.duration for g in goals)
+    if max_time is not None and paused >= max_time:
+        raise f.fail("max_time", f"the pauses take {paused:g} s, at least max_time = {max_time:g} s; expected more")
     if any(g.kind == "pause" for g in goals) and any(name == "effort" for name, _ in cost.terms):
         raise f.fail(
             "cost",

@@ -15,6 +15,7 @@ References used here:
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
@@ -25,6 +26,7 @@ from modular_robots.exceptions import ScenarioError
 from modular_robots.feasibility import check_composition
 from modular_robots.goals import Goal, stops_of
 from modular_robots.ocp.candidate import make_candidate
+from modular_robots.ocp.ends import DEFAULT_TOLERANCE
 from modular_robots.pipeline import candidate_specs, cost_bound
 from modular_robots.plan.trajectory import controller_rate
 from modular_robots.scenario import load_scenario
@@ -126,6 +128,16 @@ def test_effort_with_a_pause_is_refused(tmp_path):
         _load(tmp_path, "    - reach: [0.1, 0.5, 0.4]\n    - pause: 0.3", cost="effort")
 
 
+def test_pauses_as_long_as_max_time_are_refused(tmp_path):
+    text = _scenario_text("    - reach: [0.1, 0.5, 0.4]\n    - pause: 1.5\n    - return: start")
+    path = tmp_path / "paused.yaml"
+    path.write_text(text + "  max_time: 1.5\n")
+    with pytest.raises(ScenarioError, match=r"task\.max_time: the pauses take 1\.5 s, at least max_time = 1\.5 s"):
+        load_scenario(path)
+    path.write_text(text + "  max_time: 4\n")
+    assert load_scenario(path).task.max_time == 4.0
+
+
 def test_goal_and_goals_together_are_refused(tmp_path):
     text = _scenario_text("    - reach: [0.1, 0.5, 0.4]").replace("  goals:", "  goal: [0.1, 0.5, 0.4]\n  goals:")
     path = tmp_path / "both.yaml"
@@ -156,6 +168,36 @@ def test_step_b_chains_a_return_to_the_start_configuration(pause_candidate):
     robot = problem.robot
     place = np.asarray(load_scenario(PAUSE).task.goals[0].position)
     assert np.linalg.norm(robot.tool_position(np.asarray(verdict.q_via[0])) - place) < 1e-3
+
+
+@pytest.mark.parametrize(
+    "goals",
+    [
+        "    - at: [-0.2, 0.55, 0.2]",  # the motion ends there: at rest
+        "    - at: [-0.2, 0.55, 0.2]\n    - pause: 0.5\n    - reach: [0.3, 0.1, 0.45]",
+        "    - at: [-0.2, 0.55, 0.2]\n    - reach: [0.3, 0.1, 0.45]\n    - return: 1",
+    ],
+    ids=["last", "paused", "returned-to"],
+)
+def test_an_at_goal_where_the_robot_stands_still_gets_the_static_torque_test(tmp_path, goals):
+    """15 kg at the far pose takes 101 N m of joint 2, over its 75.5 N m (Pinocchio's gravity
+    torque in the message), and less at the start: an ``at`` goal the robot stops at, pauses at
+    or comes back to rest at is held like a ``reach``; one passed moving is not."""
+
+    def verdict(text):
+        path = tmp_path / "held.yaml"
+        path.write_text(
+            _scenario_text(text)
+            .replace("payload: 1.0", "payload: 15.0")
+            .replace("[0.45, 0.25, 0.25]", "[0.30, 0.0, 0.45]")
+        )
+        scenario = load_scenario(path)
+        return check_composition(Composition.from_name(ROBOT, scenario.catalog), scenario.catalog, scenario.task)
+
+    held = verdict(goals)
+    assert not held.passed and held.message.startswith("static torque") and "joint 2" in held.message
+    passed = verdict("    - at: [-0.2, 0.55, 0.2]\n    - reach: [0.3, 0.1, 0.45]")
+    assert passed.passed, passed.message
 
 
 @pytest.mark.parametrize("path", [TWO_GOALS, PAUSE], ids=["two-goals", "pause"])
@@ -223,6 +265,16 @@ def test_a_pause_and_a_return_hold_on_the_sampled_plan(solved_pause):
     assert result.cost_bound >= 0.5  # the pause counts in the bound
 
 
+def test_a_max_time_shorter_than_the_moves_alone_ends_as_infeasible(pause_candidate):
+    """A ``max_time`` below what the moves solved alone take (the first point's durations then
+    exceed their bounds, which are kept feasible) is a diagnosis, not an error."""
+    scenario, _, spec, candidate = pause_candidate
+    assert candidate.problem.cost_bound < 1.5  # past the bound's early refusal
+    hurried = replace(scenario, task=replace(scenario.task, max_time=1.5))
+    result = make_candidate(hurried, spec).solve()
+    assert result.status == "failed" and result.reason.startswith("infeasible"), result.reason
+
+
 def test_an_at_goal_is_passed_moving_and_in_order():
     scenario = load_scenario(TWO_GOALS)
     composition = Composition.from_name(ROBOT, scenario.catalog)
@@ -248,6 +300,63 @@ def test_an_at_goal_is_passed_moving_and_in_order():
     pin.framesForwardKinematics(model, data, q[0])
     assert np.allclose(data.oMf[robot.tool_frame_id].translation, _tool(robot, q)[0])
     assert math.isfinite(result.cost_bound) and result.cost_bound < result.cost
+
+
+def test_free_ends_with_goals_unpack_and_solve_within_the_tolerances():
+    """Free ends (``optimizer.free_ends``) with a goal on the way: the end columns come back as
+    the first and last nodes, the motion passes its waypoint and ends within the goal's
+    tolerance, and freeing the ends is no slower than the fixed ends (a wider feasible set)."""
+    scenario = load_scenario(TWO_GOALS)
+    composition = Composition.from_name(ROBOT, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    spec = next(candidate_specs([verdict]))
+    results = {}
+    for free in (False, True):
+        freed = replace(scenario, optimizer=replace(scenario.optimizer, free_ends=free))
+        candidate = make_candidate(freed, spec)
+        problem = candidate.problem
+        y = problem.initial_guess()
+        _, nodes, _ = problem.unpack(y)
+        assert nodes.shape == (problem.intervals + 1, 2 * problem.nv)
+        assert np.allclose(problem.pack(problem.durations(y), nodes, problem.unpack(y)[2]), y)
+        results[free] = (problem, candidate.solve())
+    problem, result = results[True]
+    assert result.status == "optimal" and result.verification.passed, result.reason
+    robot = problem.robot
+    waypoint, goal = scenario.task.goals
+    q_through = result.trajectory.at(np.array([result.stop_times[0]]))[0]
+    assert np.linalg.norm(_tool(robot, q_through)[0] - np.asarray(waypoint.position)) <= waypoint.tolerance + 1e-6
+    for q, asked, tolerance in (
+        (result.trajectory.q[0], scenario.task.start, scenario.task.start_tolerance),
+        (result.trajectory.q[-1], goal.position, goal.tolerance),
+    ):
+        limit = DEFAULT_TOLERANCE if tolerance is None else tolerance
+        assert np.linalg.norm(_tool(robot, q)[0] - np.asarray(asked)) <= limit * (1 + 1e-6)
+    assert result.cost <= results[False][1].cost * (1 + 1e-3)
+
+
+def test_free_ends_where_the_robot_pauses_are_held_within_the_effort_bounds(tmp_path):
+    """With free ends, a pause at the start or at the goal holds a configuration step B never
+    tested: gravity-torque rows keep it within the plan's effort bounds (exact Jacobian against
+    central differences), and the plan's ends meet them (Pinocchio's gravity torque)."""
+    scenario = _load(tmp_path, "    - pause: 0.3\n    - reach: [-0.25, 0.45, 0.35]\n    - pause: 0.4")
+    scenario = replace(scenario, optimizer=replace(scenario.optimizer, free_ends=True))
+    composition = Composition.from_name(ROBOT, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    candidate = make_candidate(scenario, next(candidate_specs([verdict])))
+    problem = candidate.problem
+    assert problem.route.holds == (0.3, 0.4) and len(problem.rows_of("route")) == 2 * problem.nv
+    y = problem.initial_guess() + 0.02 * np.random.default_rng(5).standard_normal(problem.n_variables)
+    rows = problem.rows_of("route")
+    fd = central_difference(problem.constraints, y)[rows]
+    assert np.abs(fd).max() > 0.1 and row_relative_error(problem.evaluate(y).jacobian.toarray()[rows], fd).max() < 1e-5
+    result = candidate.solve()
+    assert result.status == "optimal" and result.verification.passed, result.reason
+    assert result.tf == pytest.approx(result.cost) and result.cost >= result.cost_bound >= 0.7  # the pauses count
+    robot = problem.robot
+    for q in (result.trajectory.q[0], result.trajectory.q[-1]):
+        holding = pin.computeGeneralizedGravity(robot.model, robot.data, q)
+        assert np.all(np.abs(holding) <= problem.effort_bound * (1 + 1e-6))
 
 
 def test_one_reach_goal_is_the_single_move_bit_for_bit(tmp_path):

@@ -302,7 +302,12 @@ class Candidate:
             nodes.append(phase_nodes[:-1])
             controls.append(phase_controls)
         last = np.concatenate([full.chain()[-1], np.zeros(full.nv)])
-        return full.pack(np.array(durations), np.vstack([*nodes, last]), np.vstack(controls)), offset
+        y0 = full.pack(np.array(durations), np.vstack([*nodes, last]), np.vstack(controls))
+        # within the durations' bounds, which are kept feasible (a move alone may take longer than
+        # the task's max_time allows the whole motion: the total row then says it is infeasible)
+        columns = full.duration_columns
+        y0[columns] = np.clip(y0[columns], full.variable_lower[columns], full.variable_upper[columns])
+        return y0, offset
 
     def _solve_restarting(
         self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int

@@ -332,7 +332,7 @@ class ShootingProblem:
         if self.free_ends is not None:
             rest = np.zeros(self.nv)
             first = np.concatenate([z[self._ends0 : self._ends0 + self.nv], rest])
-            last = np.concatenate([z[self._ends0 + self.nv :], rest])
+            last = np.concatenate([z[self._ends0 + self.nv : self._ends0 + 2 * self.nv], rest])
         nodes = np.vstack([first, inner, last])
         tf = float(z[0]) if self.phases == 1 else math.fsum(z[self.duration_columns])
         return tf, nodes, z[self._u0 : self._ends0].reshape(self.intervals, self.nv)
@@ -753,12 +753,18 @@ class ShootingProblem:
 
     def _route_layout(self) -> list[_RouteRows]:
         """The route's rows in order (module docstring; :class:`~modular_robots.ocp.route.Route`):
-        each via's pose, its zero velocity, the torque that holds it still through a pause (within
-        the effort bounds), its return; the goal's return (unless both ends are
+        the torque that holds a free start or goal still through a pause (within the effort bounds),
+        each via's pose, its zero velocity, the torque that holds it still through a pause, its
+        return; the goal's return (unless both ends are
         the fixed start); the motion's total duration when several phases share ``max_time``."""
         nv, groups = self.nv, []
         q_scale, v_scale = self.x_scale[:nv], self.x_scale[nv:]
         zero = np.zeros(nv)
+        if self.free_ends is not None:  # a free end where the robot pauses (step B held the fixed ones)
+            for j, node in ((0, 0), (self.phases, self.intervals)):
+                if self.route.holds[j] > 0.0:
+                    bound, q_cols = self.effort_bound, self._node_columns(node)[0]
+                    groups.append(_RouteRows("hold", -bound, bound, self.tau_scale, [q_cols] * nv, j))
         for j, via in enumerate(self.route.vias, start=1):
             q_cols, v_cols = self._node_columns(self._via_node(j))
             if via.end is not None:

@@ -402,8 +402,8 @@ class ShootingSolver:
 
 
 def _bounds(problem: ShootingProblem) -> Bounds:
-    """The variables' bounds. With several phases, their durations' lower bounds are kept
-    feasible at every iterate (trust-constr's ``keep_feasible``): measured on CoBRA's PTP_3, the
+    """The variables' bounds. With several phases, their durations' bounds (lower and upper) are
+    kept feasible at every iterate (trust-constr's ``keep_feasible``): measured on CoBRA's PTP_3, the
     cold solve otherwise stepped to negative durations at its fifth iteration (both phases'
     motions run backwards, the cost falls below zero) and stayed there to the iteration limit."""
     keep = np.zeros(problem.n_variables, dtype=bool)
