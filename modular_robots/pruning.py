@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Iterator, Mapping
+from collections.abc import Generator, Mapping
 from dataclasses import dataclass, field, replace
 
 from .execution import Executor, Lost
@@ -266,7 +266,7 @@ class PruningManager:
     #: bound rule drops a candidate only when its bound exceeds the best verified cost times this.
     band: float = 1.0
 
-    def rounds(self) -> Iterator[Progress]:
+    def rounds(self) -> Generator[Progress, None, None]:
         order = self.executor.names()
         admit = self.settings.admission if self.settings.rule == "ratio" else 0
         # With admission, candidates enter the lockstep in the order of their lower bounds, at

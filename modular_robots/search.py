@@ -60,6 +60,7 @@ from .feasibility import (
     composition_space,
 )
 from .ocp.candidate import CandidateSpec, make_candidate
+from .ocp.solver import Iterate
 from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, track_winner, winner_approach
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
@@ -67,6 +68,7 @@ from .plan.document import status_counts
 from .plan.verification import LIMIT_TOLERANCE
 from .pruning import PruningManager
 from .recorder import RunRecorder
+from .replay import ReplayingExecutor, trace_from_json, trace_json
 from .scenario import Scenario
 from .verdicts import verdict_from_json
 
@@ -177,6 +179,8 @@ class _Search:
         self.unchecked = 0  # compositions in the frontier not through any step B yet
         self.relaxed_cpu = [0, 0.0]  # compositions through the relaxed step B here, their CPU seconds
         self.rounds = 0
+        #: Whether the budget stopped a batch of step C before its end.
+        self.cut = False
         self.steps = 0
         self.stage_counts = {_UNCHECKED: 0, _RELAXED: 0}  # compositions through each step B
         #: What step B's workers get once: the catalogue, the task and each stage's settings.
@@ -209,6 +213,9 @@ class _Search:
                 self.seconds["search"] = time.perf_counter() - start
                 self._record()
                 lowest = self._lowest()
+                if self.cut:  # candidates stopped at the budget are still open
+                    ended = "budget"
+                    break
                 if lowest is None:
                     ended = "exhausted"
                     break
@@ -220,7 +227,7 @@ class _Search:
                 if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._limit():
                     self._take_pass(self.last_key, deadline)
                     continue
-                self._step()
+                self._step(deadline)
             certificate = self._certificate(ended)
             self.certificate = certificate.to_json()
             self._record()
@@ -248,7 +255,7 @@ class _Search:
             taken.append(heapq.heappop(queue))
         return taken
 
-    def _step(self) -> None:
+    def _step(self, deadline: float) -> None:
         self.steps += 1
         best = self._limit()
         unchecked = self.queues[_UNCHECKED]
@@ -257,7 +264,7 @@ class _Search:
         candidates = self._take(_CANDIDATE, self.settings.candidates) if later else []
         if candidates:
             t0 = time.perf_counter()
-            self._optimise(candidates)
+            self._optimise(candidates, deadline)
             self.seconds["optimization"] += time.perf_counter() - t0
         checks = (self._take(_RELAXED, self.batch) if later else []) + self._take(_UNCHECKED, self.batch)
         self.unchecked -= sum(item.kind == _UNCHECKED for item in checks)
@@ -354,32 +361,49 @@ class _Search:
         return objective_bound(objective, time, design)
 
     # -- stage 3: step C ------------------------------------------------------------------------------
-    def _optimise(self, items: list[_Item]) -> None:
+    def _optimise(self, items: list[_Item], deadline: float) -> None:
+        """Step C on the candidates of ``items`` in lockstep (:class:`~modular_robots.pruning.PruningManager`),
+        each written to the record with its trace as it ends (a stop loses none); those the record
+        has replay their trace (:class:`~modular_robots.replay.ReplayingExecutor`), so that the
+        batch ends as it would have without a stop. At the ``deadline`` the lockstep stops: the
+        candidates still running end ``stopped`` (unexplored, with their bound, in the
+        certificate), to be solved by a run that goes on."""
         names = [item.spec.name for item in items if item.spec is not None]
-        specs = [self.specs[name] for name in names]
         bounds = {item.spec.name: item.bound for item in items if item.spec is not None}
-        cached = self.log.batch(names)
-        if cached is None:
-            executor = make_executor(
-                make_candidate, self.scenario, specs, names, self.engine.jobs, self.scenario.execution
-            )
+        recorded = {name: found for name in names if (found := self.log.result(name)) is not None}
+        if len(recorded) < len(names):
+            traced = {name: (trace, result) for name, (result, trace) in recorded.items() if trace is not None}
+            scenario, jobs = self.scenario, self.engine.jobs
+
+            def hosts(live: list[str]):
+                specs = [self.specs[name] for name in live]
+                return make_executor(make_candidate, scenario, specs, live, jobs, scenario.execution)
+
+            executor = ReplayingExecutor(names, traced, hosts)
             incumbent = self.best.cost if self.best is not None else None
             manager = PruningManager(
                 executor, self.scenario.pruning, bounds=bounds, incumbent=incumbent, band=self.band
             )
+            rounds = manager.rounds()
             try:
-                for _ in manager.rounds():
+                for progress in rounds:
                     self.rounds += 1
+                    for name in (*progress.finished, *progress.pruned):
+                        if name not in traced:
+                            result = _labelled(manager.results[name], self.specs[name])
+                            self.log.write_result(result, executor.traces[name])
                     self._record(every=1.0)
+                    if time.perf_counter() >= deadline:
+                        self.cut = True
+                        break
             finally:
+                rounds.close()
                 executor.shutdown()
-            results = [_labelled(manager.results[name], spec) for name, spec in zip(names, specs)]
-            self.log.write_batch(names, results)
-        else:
-            results = cached
-        for result in results:
-            self.results[result.name] = result
-            self.ledger.candidate(result, bounds[result.name])
+            recorded = {name: (_labelled(manager.results[name], self.specs[name]), None) for name in names}
+        for name in names:
+            result = recorded[name][0]
+            self.results[name] = result
+            self.ledger.candidate(result, bounds[name])
             if result.status == CandidateStatus.OPTIMAL and (
                 self.best is None or (result.cost, result.name) < (self.best.cost, self.best.name)
             ):
@@ -550,7 +574,8 @@ class _Log:
         self.fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
         self.scenario = scenario
         self.verdicts: dict[tuple[int, str], dict] = {}
-        self.batches: dict[tuple[str, ...], list[dict]] = {}
+        self.results: dict[str, dict] = {}
+        self.traces: dict[str, list] = {}
         self.file: IO[str] | None = None
 
     def check(self) -> None:
@@ -606,8 +631,11 @@ class _Log:
                 continue
             try:
                 entry = json.loads(line)
-                if "batch" in entry:
-                    self.batches[tuple(entry["batch"])] = entry["results"]
+                if "result" in entry:
+                    self.results[entry["result"]["name"]] = entry["result"]
+                    self.traces[entry["result"]["name"]] = entry["trace"]
+                elif "batch" in entry:  # a record of before results were written one by one
+                    self.results.update((d["name"], d) for d in entry["results"] if d["status"] != "stopped")
                 else:
                     self.verdicts[entry["stage"], entry["verdict"]["composition"]] = entry["verdict"]
             except (ValueError, KeyError, TypeError) as exc:
@@ -627,9 +655,17 @@ class _Log:
     def write_verdict(self, stage: int, verdict: Verdict) -> None:
         self._write({"stage": stage, "verdict": {**verdict.to_json(), "seconds": verdict.seconds}})
 
-    def batch(self, names: list[str]) -> list[CandidateResult] | None:
-        documents = self.batches.get(tuple(names))
-        return None if documents is None else [_result_from_json(d) for d in documents]
+    def result(self, name: str) -> tuple[CandidateResult, list[Iterate] | None] | None:
+        """The recorded end of candidate ``name`` and the trace step D saw of it (None: no trace,
+        a record of whole batches), or None if it is not recorded."""
+        document = self.results.get(name)
+        if document is None:
+            return None
+        trace = self.traces.get(name)
+        return _result_from_json(document), None if trace is None else trace_from_json(trace)
 
-    def write_batch(self, names: list[str], results: list[CandidateResult]) -> None:
-        self._write({"batch": names, "results": [_result_json(r) for r in results]})
+    def write_result(self, result: CandidateResult, trace: list[Iterate]) -> None:
+        """Record how a candidate ended and its trace (never a stopped one: a run that goes on
+        solves it)."""
+        if result.status != CandidateStatus.STOPPED:
+            self._write({"result": _result_json(result), "trace": trace_json(trace)})

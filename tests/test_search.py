@@ -17,10 +17,11 @@ import random
 import pytest
 from click.testing import CliRunner
 
+import modular_robots.search as search_module
 from modular_robots import load_scenario
 from modular_robots.certificate import Ledger
 from modular_robots.cli import main
-from modular_robots.exceptions import InputError
+from modular_robots.exceptions import InfeasibleError, InputError
 from modular_robots.pipeline import run_scenario
 from modular_robots.plan.candidate import CandidateResult
 from modular_robots.pruning import bound_rule
@@ -121,6 +122,56 @@ def test_a_budget_ends_the_search_with_its_gap_and_a_second_run_goes_on(scenario
         assert cut.certificate.ended == "budget"
     again = search_scenario(scenario, tmp_path, jobs=1)
     assert _answers(again) == _answers(expected)
+
+
+class _Clock:
+    """The search's clock, one second per reading: a budget then falls at a given reading, the
+    same one every run (``jobs=1``)."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+def test_a_budget_stops_step_c_mid_batch_and_a_second_run_replays_what_ended(
+    scenario, uninterrupted, tmp_path, monkeypatch
+):
+    """Budgets falling all through the search (on a clock of readings): the search ends at the
+    budget's round, not at its batch's end; the candidates running then end ``stopped`` and are
+    unexplored in the certificate, never recorded; a second run replays the recorded ones (none
+    is solved twice) and ends as the uninterrupted search."""
+    expected, _, _ = uninterrupted
+    clock = _Clock()
+    monkeypatch.setattr(search_module, "time", clock)
+    search_scenario(scenario, tmp_path / "whole", jobs=1)
+    readings = int(clock.now)
+    cut_mid_batch = 0
+    for budget in range(readings // 2, readings, max(1, readings // 10)):
+        out = tmp_path / f"budget-{budget}"
+        clock.now = 0.0
+        try:
+            cut = search_scenario(scenario, out, jobs=1, settings=SearchSettings(budget=budget))
+        except InfeasibleError:  # nothing verified yet: the folder says so
+            cut = None
+        assert clock.now <= budget + 10  # the readings of one round and the end, not a batch's
+        document = json.loads((out / "result.json").read_text())
+        certificate = document["search"]["certificate"]
+        stopped = [c for c in document["candidates"] if c["status"] == "stopped"]
+        if stopped:  # a search that ended before its budget has none
+            assert certificate["ended"] == "budget" and certificate["unexplored"] >= len(stopped)
+            cut_mid_batch += cut is not None
+        records = [json.loads(line) for line in (out / STATE).read_text().splitlines()[1:]]
+        ended_before = [r["result"]["name"] for r in records if "result" in r]
+        assert all(r["result"]["status"] != "stopped" for r in records if "result" in r)
+        again = search_scenario(scenario, out, jobs=1)
+        assert _answers(again) == _answers(expected), budget
+        records = [json.loads(line) for line in (out / STATE).read_text().splitlines()[1:]]
+        names = [r["result"]["name"] for r in records if "result" in r]
+        assert len(names) == len(set(names)) and set(ended_before) <= set(names)  # none solved twice
+    assert cut_mid_batch  # some budget fell inside a batch, after one of its candidates had ended
 
 
 def test_a_record_of_another_search_is_refused_not_overwritten(scenario, uninterrupted, tmp_path):
