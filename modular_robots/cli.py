@@ -408,6 +408,13 @@ def optimize_command(
 @main.command("run")
 @click.argument("scenario_path", type=existing_file, metavar="SCENARIO")
 @click.option(
+    "--catalog",
+    type=existing_file,
+    default=None,
+    help="With a CoBRA task (SCENARIO a .json file): the catalogue to solve it with; the task is imported "
+    "as import-cobra does (cost cyc, no payload) into RESULTS/cobra/.",
+)
+@click.option(
     "--out",
     "out",
     type=str,
@@ -445,6 +452,7 @@ def optimize_command(
 @user_errors
 def run_command(
     scenario_path: Path,
+    catalog: Path | None,
     out: Path | None,
     rule: str | None,
     threshold: float | None,
@@ -455,9 +463,22 @@ def run_command(
     address: str | None,
     max_compositions: int,
 ) -> None:
-    """Steps A to E: the best composition for SCENARIO, its trajectory and a results folder."""
+    """Steps A to E: the best composition for SCENARIO (a scenario YAML, or a CoBRA task JSON with
+    --catalog), its trajectory and a results folder."""
     if budget is not None and search != "best-first":
         raise click.BadParameter("a budget ends a best-first search; add --search best-first", param_hint="--budget")
+    if scenario_path.suffix.lower() == ".json":
+        if catalog is None:
+            raise click.BadParameter(
+                f"{scenario_path} is a CoBRA task (JSON): name the catalogue to solve it with", param_hint="--catalog"
+            )
+        out = out or Path("results") / scenario_path.stem
+        scenario_path = _imported_cobra(scenario_path, catalog, out)
+    elif catalog is not None:
+        raise click.BadParameter(
+            "a scenario names its own catalogue; --catalog goes with a CoBRA task (a .json file)",
+            param_hint="--catalog",
+        )
     scenario = _execution(with_pruning(load_scenario(scenario_path), rule, threshold), engine, address)
     if threshold is not None and scenario.pruning.rule == "none":
         click.echo(f"warning: --threshold {threshold:g} has no effect: the rule none never prunes", err=True)
@@ -510,6 +531,16 @@ def run_command(
         result = run_scenario(scenario, out, jobs, on_progress=progress, max_compositions=max_compositions)
     click.echo(run_table(result, scenario))
     click.echo(f"wrote {written_files(out)}")
+
+
+def _imported_cobra(task: Path, catalog: Path, out: Path) -> Path:
+    """The scenario of the CoBRA ``task`` for ``catalog``, written (with its meshes) into the
+    results folder's ``cobra/`` (kept with the results it led to; a run again rewrites it)."""
+    distinct_files([("--out", out)], [("SCENARIO", task), ("--catalog", catalog)])
+    target = out / "cobra" / f"{task.stem}.yaml"
+    import_cobra(task, catalog, target).write(target)
+    click.echo(f"imported {task} as {target}", err=True)
+    return target
 
 
 def _step_b_left(checked: int, total: int, seconds: float) -> str:

@@ -221,6 +221,34 @@ def test_the_command_writes_a_scenario_that_runs_reads_back(tmp_path):
     assert bad.exit_code != 0 and "unknown CoBRA cost 'cyk'" in bad.output
 
 
+def test_run_solves_a_cobra_task_directly(tmp_path):
+    """``run TASK.json --catalog C``: the task imported into the results folder, solved, and the
+    winner written back as a CoBRA solution that meets the task's goals on its rows."""
+    task = _task(
+        [
+            {"ID": "a", "type": "reach", "goalPose": _pose(0.9, 0.5, 1.1)},
+            {"ID": "b", "type": "reach", "goalPose": _pose(-0.5, 0.9, 0.9)},
+        ]
+    )
+    path = tmp_path / "reach.json"
+    path.write_text(json.dumps(task))
+    catalog = ROOT / "scenarios" / "catalogs" / "paper-4dof.yaml"
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["run", str(path), "--catalog", str(catalog), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert (out / "cobra" / "reach.yaml").is_file()
+    document = json.loads((out / "result.json").read_text())
+    solution = json.loads((out / COBRA_SOLUTION).read_text())
+    assert solution["taskID"] == "test/t" and set(solution["trajectory"]["goal2time"]) == {"a", "b"}
+    figures = check_solution(task, solution, (out / document["winner"]["files"]["urdf"]).read_text(), None)
+    assert max(figures["position_error"].values()) <= 0.01
+    # a CoBRA task needs a catalogue, and a scenario has its own
+    missing = CliRunner().invoke(main, ["run", str(path), "--out", str(tmp_path / "x")])
+    assert missing.exit_code != 0 and "--catalog" in missing.output and "CoBRA task" in missing.output
+    scenario = CliRunner().invoke(main, ["run", str(out / "cobra" / "reach.yaml"), "--catalog", str(catalog)])
+    assert scenario.exit_code != 0 and "a scenario names its own catalogue" in scenario.output
+
+
 def test_sample_times_keep_every_event_and_the_step():
     t = sample_times([0.0, 0.0301, 0.5, 0.5000000001, 1.0], 0.01)
     assert t[0] == 0.0 and t[-1] == 1.0 and np.any(np.isclose(t, 0.0301, rtol=0, atol=1e-15))
