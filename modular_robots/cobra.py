@@ -359,7 +359,7 @@ def _obstacles(data: dict, to_base: np.ndarray, task_path: Path, output: Path) -
                 else:
                     name = f"meshes/{re.sub(r'[^A-Za-z0-9._-]', '_', source.name)}"
                     meshes[name] = source
-                scale = _number(p.get("scale", 1.0), f"{part}: parameters.scale")
+                scale = _scale(p.get("scale", 1.0), f"{part}: parameters.scale")
                 obstacles.append({"mesh": {"file": name, "scale": scale, "position": center, "rpy": rpy}})
             else:
                 raise ScenarioError(
@@ -367,6 +367,20 @@ def _obstacles(data: dict, to_base: np.ndarray, task_path: Path, output: Path) -
                     "mesh"
                 )
     return obstacles, meshes
+
+
+def _scale(value: Any, where: str) -> float:
+    """A mesh's scale: a number, or three equal ones (a scale per axis is not supported)."""
+    if isinstance(value, list):
+        _expect(len(value) == 3, where, f"expected a number or three, got {len(value)}")
+        factors = [_number(v, where) for v in value]
+        _expect(
+            max(factors) - min(factors) <= 1e-12 * max(abs(f) for f in factors),
+            where,
+            f"a different scale per axis {factors} is not supported; expected one scale for all three",
+        )
+        return factors[0]
+    return _number(value, where)
 
 
 def _relative(path: Path, folder: Path) -> str:

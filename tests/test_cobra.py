@@ -191,6 +191,26 @@ def test_a_return_to_null_or_to_a_pause_goes_where_the_robot_stood(tmp_path):
     ]
 
 
+def test_a_mesh_scale_of_three_equal_factors_is_one_and_unequal_ones_are_refused(tmp_path):
+    (tmp_path / "tasks").mkdir()
+    (tmp_path / "assets").mkdir()
+    mesh = "QUASER_MV205_v3_compressed.stl"
+    (tmp_path / "assets" / mesh).write_bytes((TASKS.parent / "assets" / mesh).read_bytes())
+    task = json.loads((TASKS / "PTP_3.json").read_text())
+    geometry = task["obstacles"][0]["collision"][0]
+    geometry["parameters"].update(file=f"assets/{mesh}", scale=[0.001, 0.001, 0.001])
+    path = tmp_path / "tasks" / "t.json"
+    path.write_text(json.dumps(task))
+    out = tmp_path / "s.yaml"
+    import_cobra(path, IMPROV_6DOF, out).write(out)
+    (obstacle,) = [o for o in load_scenario(out).task.obstacles if o.kind == "mesh"]
+    assert obstacle.scale == 0.001
+    geometry["parameters"]["scale"] = [0.001, 0.002, 0.001]
+    path.write_text(json.dumps(task))
+    with pytest.raises(ScenarioError, match=r"collision\[0\]: parameters.scale: a different scale per axis"):
+        import_cobra(path, IMPROV_6DOF, out)
+
+
 def test_cost_descriptors_map_and_typos_are_named():
     assert cobra_cost("cyc") == "time"
     assert cobra_cost("cyc_2,mass_0.1") == "2*time + 0.1*mass"
