@@ -323,6 +323,9 @@ class PruningManager:
                         self.results.setdefault(name, result)
             except Exception:
                 logger.debug("stopping the live candidates failed", exc_info=True)
+                for name in alive:
+                    stopped = CandidateResult.never_started(name, "stopped; its worker did not answer")
+                    self.results.setdefault(name, stopped)
             finally:
                 self.executor.shutdown()
             for name in waiting:

@@ -12,6 +12,7 @@ while no candidate that had ended is solved twice.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,7 @@ from .plan.candidate import CandidateResult
 
 __all__ = ["ReplayingExecutor", "trace_json", "trace_from_json"]
 
+_EMPTY = np.zeros(0)
 #: The fields of an iterate that step D reads (:class:`~modular_robots.pruning.PruningManager`).
 _FIELDS = ("iteration", "cost", "constraint_violation", "tf", "refinement", "cost_bound")
 
@@ -34,14 +36,13 @@ def trace_json(trace: Sequence[Iterate]) -> list[list[float]]:
 def trace_from_json(rows: Sequence[Sequence[float]]) -> list[Iterate]:
     """The iterates of :func:`trace_json`'s rows (without the decision vector, which step D does
     not read)."""
-    empty = np.zeros(0)
     return [
         Iterate(
             iteration=int(row[0]),
             cost=row[1],
             constraint_violation=row[2],
             tf=row[3],
-            y=empty,
+            y=_EMPTY,
             refinement=int(row[4]),
             cost_bound=row[5],
         )
@@ -66,7 +67,7 @@ class ReplayingExecutor:
         self._position = dict.fromkeys(recorded, 0)
         live = [name for name in self._names if name not in recorded]
         self._inner = make_inner(live) if live else None
-        #: The iterates each job has given so far.
+        #: The iterates each job has given so far (without their decision vectors).
         self.traces: dict[str, list[Iterate]] = {name: [] for name in self._names}
 
     def names(self) -> list[str]:
@@ -83,7 +84,7 @@ class ReplayingExecutor:
                 out[name] = (False, trace[k]) if k < len(trace) else (True, result)
             ended, value = out[name]
             if not ended:
-                self.traces[name].append(value)
+                self.traces[name].append(replace(value, y=_EMPTY))
         return out
 
     def stop(self, names: Sequence[str]) -> dict[str, Any]:

@@ -266,6 +266,8 @@ class _Search:
             t0 = time.perf_counter()
             self._optimise(candidates, deadline)
             self.seconds["optimization"] += time.perf_counter() - t0
+            if self.cut:  # the budget: no step B after it
+                return
         checks = (self._take(_RELAXED, self.batch) if later else []) + self._take(_UNCHECKED, self.batch)
         self.unchecked -= sum(item.kind == _UNCHECKED for item in checks)
         if checks:
@@ -384,22 +386,30 @@ class _Search:
             manager = PruningManager(
                 executor, self.scenario.pruning, bounds=bounds, incumbent=incumbent, band=self.band
             )
-            rounds = manager.rounds()
+            rounds, written = manager.rounds(), set(traced)
+
+            def record(ended) -> None:
+                for name in ended:
+                    if name not in written:
+                        written.add(name)
+                        self.log.write_result(_labelled(manager.results[name], self.specs[name]), executor.traces[name])
+
+            cut = False
             try:
                 for progress in rounds:
                     self.rounds += 1
-                    for name in (*progress.finished, *progress.pruned):
-                        if name not in traced:
-                            result = _labelled(manager.results[name], self.specs[name])
-                            self.log.write_result(result, executor.traces[name])
+                    record((*progress.finished, *progress.pruned))
                     self._record(every=1.0)
-                    if time.perf_counter() >= deadline:
-                        self.cut = True
+                    if progress.alive and time.perf_counter() >= deadline:
+                        cut = True
                         break
             finally:
                 rounds.close()
                 executor.shutdown()
+            # (candidates dropped at admission after the last round are not in a progress)
+            record(name for name in names if name in manager.results)
             recorded = {name: (_labelled(manager.results[name], self.specs[name]), None) for name in names}
+            self.cut = cut and any(r.status == CandidateStatus.STOPPED for r, _ in recorded.values())
         for name in names:
             result = recorded[name][0]
             self.results[name] = result

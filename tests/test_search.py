@@ -171,6 +171,7 @@ def test_a_budget_stops_step_c_mid_batch_and_a_second_run_replays_what_ended(
         records = [json.loads(line) for line in (out / STATE).read_text().splitlines()[1:]]
         names = [r["result"]["name"] for r in records if "result" in r]
         assert len(names) == len(set(names)) and set(ended_before) <= set(names)  # none solved twice
+        assert set(names) == {c.name for c in again.candidates}  # every end recorded, dropped ones too
     assert cut_mid_batch  # some budget fell inside a batch, after one of its candidates had ended
 
 
