@@ -29,8 +29,9 @@ from .catalog import Catalog
 from .composition import Composition
 from .costs import COSTS, Design, DesignCost, Objective, design_of
 from .feasibility import _piece_reach, _reach_along
+from .goals import tool_path_gap
 from .modules import Joint
-from .plan.verification import LIMIT_TOLERANCE, TERMINAL_TOLERANCE
+from .plan.verification import GOAL_TOLERANCE, LIMIT_TOLERANCE, TERMINAL_TOLERANCE
 from .scenario import Task
 from .urdf_assembly import RX_PI, matrix
 
@@ -206,17 +207,28 @@ def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolera
 
     For the time (:data:`TOOL_SPEED`) [s]: the distance between the start and the goal less
     both position tolerances (``task``'s, else step B's IK ``tolerance`` [m]) and verification's
-    terminal tolerance, over :func:`tool_speed_limit` raised by verification's limit tolerance.
-    For the task's objective, :func:`objective_bound` of that time (``none`` when it is 0)."""
+    terminal tolerance, over :func:`tool_speed_limit` raised by verification's limit tolerance;
+    for a task of several goals, the tool's path through them
+    (:func:`~modular_robots.goals.tool_path_gap`) less verification's tolerances, at that speed,
+    plus the pauses. For the task's objective, :func:`objective_bound` of that time (``none``
+    when it is 0)."""
     objective = task.cost
     time = 0.0
     if objective.counts_time:
-        gap = (
-            math.dist(task.start, task.goal) - (task.start_tolerance or tolerance) - (task.goal_tolerance or tolerance)
-        )
         speed = tool_speed_limit(composition, catalog) * (1.0 + LIMIT_TOLERANCE)
-        gap -= TERMINAL_TOLERANCE
-        time = max(gap, 0.0) / speed if 0.0 < speed < math.inf else 0.0
+        if task.goals:
+            gap = tool_path_gap(task.start, task.start_tolerance or tolerance, task.goals, tolerance)
+            gap -= TERMINAL_TOLERANCE + GOAL_TOLERANCE * sum(g.moves for g in task.goals)
+            paused = math.fsum(g.duration for g in task.goals)
+        else:
+            gap = (
+                math.dist(task.start, task.goal)
+                - (task.start_tolerance or tolerance)
+                - (task.goal_tolerance or tolerance)
+            )
+            gap -= TERMINAL_TOLERANCE
+            paused = 0.0
+        time = (max(gap, 0.0) / speed if 0.0 < speed < math.inf else 0.0) + paused
     value = objective_bound(
         objective, time, design_of(composition.modules, catalog) if objective.counts_design else None
     )

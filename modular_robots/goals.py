@@ -15,11 +15,13 @@ duration (:class:`~modular_robots.ocp.ShootingProblem`).
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import dataclass
 
 from .orientation import Orientation
 
-__all__ = ["Goal", "GOAL_KINDS", "START", "Stop", "stops_of"]
+__all__ = ["Goal", "GOAL_KINDS", "START", "Stop", "stops_of", "tool_path_gap"]
 
 #: The kinds of goal, as a scenario names them.
 GOAL_KINDS = ("at", "reach", "pause", "return")
@@ -89,3 +91,24 @@ def stops_of(goals: tuple[Goal, ...]) -> tuple[float, tuple[Stop, ...]]:
         last = stops[-1]
         stops[-1] = Stop(last.goal, True, last.returns_to, last.hold)
     return start_hold, tuple(stops)
+
+
+def tool_path_gap(
+    start: tuple[float, float, float], start_tolerance: float, goals: tuple[Goal, ...], tolerance: float
+) -> float:
+    """The least distance [m] the tool travels from ``start`` through ``goals`` in order: each
+    move at least the distance between the nominal positions of its ends less both position
+    tolerances (``tolerance`` for a goal that gives none), a return ending where the goal it names
+    was. Valid for every motion that meets the goals, whatever the robot."""
+    places: list[tuple[tuple[float, ...], float]] = [(start, start_tolerance)]
+    index_of = {START: 0}
+    for goal in goals:
+        if goal.kind == "pause":
+            continue
+        if goal.kind == "return":
+            places.append(places[index_of[str(goal.to)]])
+        else:
+            assert goal.position is not None  # an at or reach goal
+            places.append((goal.position, tolerance if goal.tolerance is None else goal.tolerance))
+        index_of[goal.id] = len(places) - 1
+    return math.fsum(max(math.dist(a, b) - s - t, 0.0) for (a, s), (b, t) in itertools.pairwise(places))

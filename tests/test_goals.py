@@ -14,6 +14,7 @@ References used here:
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -21,10 +22,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from modular_robots.bounds import catalog_bound
+from modular_robots.cobra import import_cobra
 from modular_robots.composition import Composition
 from modular_robots.exceptions import ScenarioError
 from modular_robots.feasibility import check_composition
-from modular_robots.goals import Goal, stops_of
+from modular_robots.goals import Goal, stops_of, tool_path_gap
 from modular_robots.ocp.candidate import make_candidate
 from modular_robots.ocp.ends import DEFAULT_TOLERANCE
 from modular_robots.pipeline import candidate_specs, cost_bound
@@ -300,6 +303,51 @@ def test_an_at_goal_is_passed_moving_and_in_order():
     pin.framesForwardKinematics(model, data, q[0])
     assert np.allclose(data.oMf[robot.tool_frame_id].translation, _tool(robot, q)[0])
     assert math.isfinite(result.cost_bound) and result.cost_bound < result.cost
+
+
+def test_the_tool_path_through_the_goals_by_hand():
+    goals = (
+        Goal("reach", "a", (1.0, 0.0, 0.0), tolerance=0.1),
+        Goal("pause", "p", duration=0.5),
+        Goal("at", "b", (1.0, 2.0, 0.0)),
+        Goal("return", "back", to="a"),
+        Goal("return", "home", to="start"),
+    )
+    # 1 - 0.1, then 2 - 0.1 - 0.01 (b has no tolerance: 0.01), back the same, then home 1 - 0.1
+    expected = 0.9 + 1.89 + 1.89 + 0.9
+    assert tool_path_gap((0.0, 0.0, 0.0), 0.0, goals, 0.01) == pytest.approx(expected, rel=1e-15)
+
+
+def test_the_catalogue_bound_through_the_goals_is_below_every_solved_optimum(tmp_path):
+    """The catalogue bound of a task of several goals (the tool's path through them at its largest
+    speed from catalogue numbers, plus the pauses) never exceeds a solved, verified optimum: the
+    winners the goals benchmark recorded (CoBRA's PTP_3 and PTP_pause imported, the two scenarios)
+    and one solved here; it is sharper than the start-to-goal bound where the motion comes back."""
+    rows = json.loads((ROOT / "benchmarks" / "results" / "goals.json").read_text())["rows"]
+    checked = 0
+    for row in rows:
+        if row["winner"] is None:
+            continue
+        if row["task"].startswith("PTP"):
+            path = tmp_path / f"{row['task']}-{row['catalog']}.yaml"
+            catalog = ROOT / "scenarios" / "catalogs" / f"{row['catalog']}.yaml"
+            import_cobra(ROOT / "scenarios" / "cobra" / "tasks" / f"{row['task']}.json", catalog, path).write(path)
+        else:
+            path = ROOT / "scenarios" / f"{row['task']}.yaml"
+        scenario = load_scenario(path)
+        composition = Composition.from_name(row["winner"].split("+")[0], scenario.catalog)
+        bound = catalog_bound(composition, scenario.catalog, scenario.task, DEFAULT_TOLERANCE)
+        assert bound.name == "tool speed" and 0.0 < bound.value <= row["cycle_s"], (row["task"], bound)
+        one_move = replace(scenario.task, goals=())
+        assert bound.value > catalog_bound(composition, scenario.catalog, one_move, DEFAULT_TOLERANCE).value
+        checked += 1
+    assert checked >= 4
+    scenario = load_scenario(TWO_GOALS)
+    composition = Composition.from_name(ROBOT, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    result = make_candidate(scenario, next(candidate_specs([verdict]))).solve()
+    assert result.status == "optimal"
+    assert catalog_bound(composition, scenario.catalog, scenario.task, DEFAULT_TOLERANCE).value <= result.cost
 
 
 def test_free_ends_with_goals_unpack_and_solve_within_the_tolerances():
