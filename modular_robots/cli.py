@@ -566,9 +566,12 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
             last.update(f)
             best = "-" if f["best"] is None else f"{f['best']:.4g}"
             lowest = "-" if f["lowest_bound"] is None else f"{f['lowest_bound']:.4g}"
+            running = f["running"]
             live.show(
                 f"search: {f['checked']:,} of {f['space']:,} compositions settled, {f['candidates']} candidates "
-                f"optimised, best verified {best}, smallest bound left {lowest}{_eta(f)}"
+                f"optimised"
+                + (f" ({running['candidates']} running, iteration {running['round']})" if running["candidates"] else "")
+                + f", best verified {best}, smallest bound left {lowest}{_eta(f)}"
             )
 
         result = search_scenario(scenario, out, jobs, SearchSettings(budget=budget), on_progress=progress)

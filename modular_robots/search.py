@@ -181,6 +181,8 @@ class _Search:
         self.rounds = 0
         #: Whether the budget stopped a batch of step C before its end.
         self.cut = False
+        #: Step C's batch under way: its candidates not ended yet and its lockstep round.
+        self.running = (0, 0)
         self.steps = 0
         self.stage_counts = {_UNCHECKED: 0, _RELAXED: 0}  # compositions through each step B
         #: What step B's workers get once: the catalogue, the task and each stage's settings.
@@ -398,12 +400,14 @@ class _Search:
             try:
                 for progress in rounds:
                     self.rounds += 1
+                    self.running = (progress.alive, progress.round)
                     record((*progress.finished, *progress.pruned))
                     self._record(every=1.0)
                     if progress.alive and time.perf_counter() >= deadline:
                         cut = True
                         break
             finally:
+                self.running = (0, 0)
                 rounds.close()
                 executor.shutdown()
             # (candidates dropped at admission after the last round are not in a progress)
@@ -493,6 +497,7 @@ class _Search:
             "step_b_relaxed": self.stage_counts[_UNCHECKED],
             "step_b": self.stage_counts[_RELAXED],
             "candidates": len(self.results),
+            "running": {"candidates": self.running[0], "round": self.running[1]},
             "waiting": {
                 "step_b_relaxed": self.unchecked + self.space - self.passed,
                 "step_b": len(self.queues[_RELAXED]),
