@@ -36,7 +36,7 @@ COBRA = ("PTP_1", "PTP_2", "PTP_3", "PTP_pause")
 CATALOGS = (
     ("improv-6dof", ()),
     ("improv-science2019", ("--search", "best-first", "--budget", "720")),
-    ("geometric-6dof", ("--search", "best-first", "--budget", "720")),
+    ("geometric-6dof", ("--search", "best-first", "--budget", "480")),
 )
 
 

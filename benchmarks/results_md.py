@@ -323,7 +323,7 @@ def _goals_lines() -> list[str]:
         _measured(doc)
         + f" Load average {doc['load_average_before']:.1f} before, {doc['load_average_after']:.1f} after; each row "
         "one `run` as a whole process on 2 cores (CoBRA's tasks after `import-cobra`; the Science2019 and "
-        "geometric-6dof spaces by the best-first search within 720 s, certified where it says yes).",
+        "geometric-6dof spaces by the best-first search within 720 s and 480 s, certified where it says yes).",
         "",
         "| task | catalogue | feasible | verified / candidates | wall s | winner | cycle time s | moves end at s | "
         "certified | CoBRA check | why no winner |",
