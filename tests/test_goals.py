@@ -338,8 +338,12 @@ def test_the_catalogue_bound_through_the_goals_is_below_every_solved_optimum(tmp
         composition = Composition.from_name(row["winner"].split("+")[0], scenario.catalog)
         bound = catalog_bound(composition, scenario.catalog, scenario.task, DEFAULT_TOLERANCE)
         assert bound.name == "tool speed" and 0.0 < bound.value <= row["cycle_s"], (row["task"], bound)
-        one_move = replace(scenario.task, goals=())
-        assert bound.value > catalog_bound(composition, scenario.catalog, one_move, DEFAULT_TOLERANCE).value
+        one_move = catalog_bound(composition, scenario.catalog, replace(scenario.task, goals=()), DEFAULT_TOLERANCE)
+        goals = scenario.task.goals
+        if sum(g.moves for g in goals) > 1 or any(g.duration for g in goals):  # a longer path, or pauses
+            assert bound.value > one_move.value
+        else:  # one move: the same bound, less verification's 1e-5 m at the goal
+            assert bound.value == pytest.approx(one_move.value, rel=1e-3)
         checked += 1
     assert checked >= 4
     scenario = load_scenario(TWO_GOALS)
