@@ -13,6 +13,7 @@ from typing import Any
 
 import click
 
+from ._yamlio import MAX_FILE_BYTES
 from .cli_inputs import (
     ExistingPath,
     Number,
@@ -467,7 +468,7 @@ def run_command(
     --catalog), its trajectory and a results folder."""
     if budget is not None and search != "best-first":
         raise click.BadParameter("a budget ends a best-first search; add --search best-first", param_hint="--budget")
-    if scenario_path.suffix.lower() == ".json":
+    if _is_cobra_task(scenario_path):
         if catalog is None:
             raise click.BadParameter(
                 f"{scenario_path} is a CoBRA task (JSON): name the catalogue to solve it with", param_hint="--catalog"
@@ -476,7 +477,7 @@ def run_command(
         scenario_path = _imported_cobra(scenario_path, catalog, out)
     elif catalog is not None:
         raise click.BadParameter(
-            "a scenario names its own catalogue; --catalog goes with a CoBRA task (a .json file)",
+            "a scenario names its own catalogue; --catalog goes with a CoBRA task (a JSON file with header and goals)",
             param_hint="--catalog",
         )
     scenario = _execution(with_pruning(load_scenario(scenario_path), rule, threshold), engine, address)
@@ -533,6 +534,19 @@ def run_command(
     click.echo(f"wrote {written_files(out)}")
 
 
+def _is_cobra_task(path: Path) -> bool:
+    """Whether ``path`` is a CoBRA task: a ``.json`` file whose object has a ``header`` and
+    ``goals`` (a scenario written as JSON has neither)."""
+    if path.suffix.lower() != ".json":
+        return False
+    try:
+        with open(path, encoding="utf-8") as file:
+            document = json.loads(file.read(MAX_FILE_BYTES + 1))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and "header" in document and "goals" in document
+
+
 def _imported_cobra(task: Path, catalog: Path, out: Path) -> Path:
     """The scenario of the CoBRA ``task`` for ``catalog``, written (with its meshes) into the
     results folder's ``cobra/`` (kept with the results it led to; a run again rewrites it)."""
@@ -566,11 +580,11 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
             last.update(f)
             best = "-" if f["best"] is None else f"{f['best']:.4g}"
             lowest = "-" if f["lowest_bound"] is None else f"{f['lowest_bound']:.4g}"
-            running = f["running"]
+            batch, round_ = f["running"]["candidates"], f["running"]["round"]
             live.show(
                 f"search: {f['checked']:,} of {f['space']:,} compositions settled, {f['candidates']} candidates "
                 f"optimised"
-                + (f" ({running['candidates']} running, iteration {running['round']})" if running["candidates"] else "")
+                + (f" ({batch} in step C, iteration {round_})" if batch else "")
                 + f", best verified {best}, smallest bound left {lowest}{_eta(f)}"
             )
 
