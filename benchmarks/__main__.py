@@ -1,6 +1,6 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
 runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite, timor,
-engines, search, costs, goals). RESULTS.md is rewritten at the end.
+engines, search, costs, goals, mesh). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -16,6 +16,7 @@ from . import (
     bench_goals,
     bench_ipopt,
     bench_margins,
+    bench_mesh,
     bench_models,
     bench_ocp,
     bench_profile,
@@ -42,6 +43,7 @@ BENCHES = {
     "search": bench_search,
     "costs": bench_costs,
     "goals": bench_goals,
+    "mesh": bench_mesh,
 }
 
 with single_threaded_blas():

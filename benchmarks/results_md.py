@@ -598,6 +598,7 @@ def build() -> str:
             )
         lines.append("")
     lines += _timor_lines()
+    lines += _mesh_lines()
     return "\n".join(lines + _history())
 
 
@@ -636,6 +637,28 @@ def _timor_lines() -> list[str]:
         "",
     ]
     return lines
+
+
+def _mesh_lines() -> list[str]:
+    """Mesh obstacle queries (``bench_mesh.py``)."""
+    doc = _load("mesh")
+    if not doc:
+        return []
+    lines = [
+        "## Mesh obstacle queries",
+        "",
+        _measured(doc),
+        f"Signed distances of random capsules in and around {doc['mesh']} ({doc['triangles']:,} triangles in "
+        f"{doc['groups']} groups), as placed in CoBRA's PTP_2; every row gives the same distances:",
+        "",
+        "| queries | pairs a call | ms a pair | axes meeting the mesh |",
+        "|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['queries']} | {r['pairs_a_call']} | {r['ms_a_pair']:.3f} | {r['axes_meeting_mesh']} of {r['pairs']} |"
+        for r in doc["rows"]
+    ]
+    return lines + [""]
 
 
 def main() -> None:

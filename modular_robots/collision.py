@@ -113,6 +113,13 @@ class CollisionModel:
             index = [j for j, o in enumerate(self.obstacles) if type(o) is cls]
             self._groups.append((cls, index, cls.batch([self.obstacles[j] for j in index])))
         self._obstacle_objects = [_shared_object(("obstacle", o), _obstacle_object, o) for o in self.obstacles]
+        #: The closed-form obstacles that measure many capsules at once (``signed_distances``, as
+        #: :meth:`~modular_robots.obstacles.MeshObstacle.signed_distances`), with that method.
+        self._batched = [
+            (j, o.signed_distances)
+            for j, o in enumerate(self.obstacles)
+            if o.closed_form and hasattr(o, "signed_distances")
+        ]
         #: ``(P, O)``: False for the pairs not measured (see :meth:`_moved_toward`); None when
         #: every pair is.
         self._applies: np.ndarray | None = None
@@ -225,6 +232,13 @@ class CollisionModel:
         dist = np.full(measure.shape, np.inf)
         on_robot = np.zeros(measure.shape + (3,))
         on_obstacle = np.zeros(measure.shape + (3,))
+        given = np.full(measure.shape + (3,), np.nan)  # gradients the shapes give with their distances
+        for j, many in self._batched:  # every pair of such a shape at once
+            ks, iis = np.nonzero(measure[:, :, j])
+            if ks.size:
+                measure[ks, iis, j] = False
+                d, pr, po, g = many(mid[ks, iis], rot[ks, iis, :, 2], self._prim_lengths[iis], self._prim_radii[iis])
+                dist[ks, iis, j], on_robot[ks, iis, j], on_obstacle[ks, iis, j], given[ks, iis, j] = d, pr, po, g
         ks, iis, js = np.nonzero(measure)  # grouped by (k, i): each primitive is placed once
         found, placed = [], None
         for k, i, j in zip(ks.tolist(), iis.tolist(), js.tolist()):
@@ -232,7 +246,6 @@ class CollisionModel:
                 _place(self._robot_objects[i], rot[k, i], mid[k, i])
                 placed = (k, i)
             found.append(self._pair_distance(i, j, mid[k, i], rot[k, i]))
-        given = np.full(measure.shape + (3,), np.nan)  # gradients the shapes give with their distances
         if found:
             d, pr, po, gradients = zip(*found)
             dist[ks, iis, js], on_robot[ks, iis, js], on_obstacle[ks, iis, js] = d, pr, po
@@ -322,14 +335,23 @@ class CollisionModel:
         pair (primitive and obstacle indices; inf and -1, -1: no pair measured), as
         :meth:`distances` measures it: the pairs are measured in the order of their shapes' lower
         bounds, until the next bound is above the nearest distance found (a box or cylinder
-        measures a pair by a search along the link, so most of them are then never measured)."""
+        measures a pair by a search along the link, so most of them are then never measured); a
+        shape that measures many pairs at once (a mesh) first measures all of its pairs whose
+        lower bound is below every pair's smallest upper bound."""
         rot, mid, _ = self._placements(np.asarray(q, dtype=float)[None], jacobians=False)
         rot, mid = rot[0], mid[0]
         if not self.obstacles or not len(self._primitives):
             return math.inf, -1, -1
-        lower, _ = self._bounds(rot[None], mid[None])
-        lower = lower[0]
+        lower, upper = self._bounds(rot[None], mid[None])
+        lower, upper = lower[0], upper[0]
         best, pair = math.inf, (-1, -1)
+        for j, many in self._batched:  # every pair that may be nearest at once
+            rows = np.flatnonzero(np.isfinite(lower[:, j]) & (lower[:, j] <= upper.min() + _BOUND_SLACK))
+            lower[:, j] = math.inf
+            if rows.size:
+                d = many(mid[rows], rot[rows, :, 2], self._prim_lengths[rows], self._prim_radii[rows])[0]
+                if d.min() < best:
+                    best, pair = float(d.min()), (int(rows[np.argmin(d)]), j)
         placed = None
         for flat in np.argsort(lower, axis=None, kind="stable").tolist():
             i, j = divmod(flat, lower.shape[1])
@@ -370,6 +392,15 @@ class CollisionModel:
         if upper.min() < clearance - _BOUND_SLACK:
             return False
         undecided = lower < clearance + _BOUND_SLACK
+        for j, many in self._batched:  # an axis that meets the shape need not be measured: too near
+            ks, iis = np.nonzero(undecided[:, :, j])
+            undecided[:, :, j] = False
+            if not ks.size:
+                continue
+            radii = self._prim_radii[iis]
+            deep = bool(np.any(-radii >= clearance))
+            if np.any(many(mid[ks, iis], rot[ks, iis, :, 2], self._prim_lengths[iis], radii, deep)[0] < clearance):
+                return False
         placed = None
         for k, i, j in zip(*(index.tolist() for index in np.nonzero(undecided))):
             if placed != (k, i):

@@ -15,7 +15,18 @@ import numpy as np
 
 from ._geometry import segment_parameters
 
-__all__ = ["closest_on_triangles", "segment_triangles", "segment_crossings", "winding_numbers"]
+__all__ = [
+    "closest_on_triangles",
+    "segment_triangles",
+    "segment_crossings",
+    "ray_crossings",
+    "winding_numbers",
+    "is_closed",
+]
+
+#: Barycentric margin within which a ray is taken to pass through a triangle's edge or corner, or
+#: a point to lie on its plane: there a crossing count is ambiguous.
+_EDGE = 1e-9
 
 
 def closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -68,28 +79,68 @@ def segment_triangles(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The closest points of the segment ``start + t direction`` (``t`` in [0, 1]; a point if
     ``direction`` is zero) and of each triangle: on the segment and on the triangles, ``(T, 3)``
-    each; where they cross, the crossing point for both."""
+    each; where they cross, the crossing point for both. ``start`` and ``direction`` are one
+    segment ``(3,)`` or one a triangle ``(T, 3)``."""
     count = len(a)
-    ends = np.stack([start, start + direction])
+    start, direction = np.broadcast_to(start, a.shape), np.broadcast_to(direction, a.shape)
+    ends = np.concatenate([start, start + direction])
     corners = np.concatenate([a, b, c])  # the three edges of every triangle, from these corners
     edges = np.concatenate([b, c, a]) - corners
-    s, t = segment_parameters(start, direction, corners, edges)
-    on_segment = np.concatenate(
-        [np.broadcast_to(ends[:, None], (2, count, 3)), (start + s[:, None] * direction).reshape(3, count, 3)]
-    )
-    on_triangle = np.concatenate(
-        [closest_on_triangles(ends, a, b, c), (corners + t[:, None] * edges).reshape(3, count, 3)]
-    )  # (5, T, 3): the two ends, the three edges
-    gap = on_segment - on_triangle
+    starts, directions = np.concatenate([start] * 3), np.concatenate([direction] * 3)
+    s, t = segment_parameters(starts, directions, corners, edges)
+    on_segment = np.concatenate([ends, starts + s[:, None] * directions]).reshape(5, count, 3)
+    on_ends = closest_on_triangles(ends, *(np.concatenate([v, v])[:, None] for v in (a, b, c)))[:, 0]
+    on_triangle = np.concatenate([on_ends, corners + t[:, None] * edges]).reshape(5, count, 3)
+    gap = on_segment - on_triangle  # (5, T, 3): the two ends, the three edges
     best = np.argmin(np.einsum("ktc,ktc->kt", gap, gap), axis=0)
     columns = np.arange(count)
     on_segment, on_triangle = on_segment[best, columns], on_triangle[best, columns]
     crossing, _ = segment_crossings(start, direction, a, b, c)
     hit = ~np.isnan(crossing)
     if hit.any():
-        point = start + crossing[hit, None] * direction
+        point = start[hit] + crossing[hit, None] * direction[hit]
         on_segment[hit], on_triangle[hit] = point, point
     return on_segment, on_triangle
+
+
+def ray_crossings(
+    points: np.ndarray, ray: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whether the ray segment ``point + t ray``, ``t`` in [0, 1], from each point ``(P, 3)``
+    (``ray`` ``(P, 3)`` or ``(3,)``) crosses the triangle of its row (``a, b, c`` ``(P, 3)``;
+    Moeller and Trumbore): the change of the winding number there ``(P,)`` (+1 or -1; 0 where
+    it does not cross), and whether the answer is ambiguous ``(P,)``: the ray grazes an edge or
+    a corner, runs in the triangle's plane, or starts on it (within :data:`_EDGE`)."""
+    e1, e2 = b - a, c - a
+    h = np.cross(ray, e2)
+    det = _dot(e1, h)
+    scale = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(ray, axis=-1)
+    flat = np.abs(det) <= _EDGE * scale
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = np.where(flat, 0.0, 1.0 / np.where(flat, 1.0, det))
+        s = points - a
+        u = inverse * _dot(s, h)
+        q = np.cross(s, e1)
+        v = inverse * _dot(q, np.broadcast_to(ray, q.shape))
+        t = inverse * _dot(e2, q)
+    w = 1.0 - u - v
+    within = (u >= -_EDGE) & (v >= -_EDGE) & (w >= -_EDGE) & (t >= -_EDGE) & (t <= 1.0 + _EDGE)
+    edge = (np.minimum(np.minimum(u, v), w) <= _EDGE) | (np.abs(t) <= _EDGE)
+    hit = within & ~flat & ~edge
+    return np.where(hit, np.sign(det), 0.0), flat | (within & edge)
+
+
+def is_closed(triangles: np.ndarray) -> bool:
+    """Whether the triangles ``(T, 3, 3)`` close (equal corners taken as one vertex): each edge
+    is run through as often one way as the other, so that the winding number is an integer off
+    the surface and a ray's crossings count it."""
+    _, index = np.unique(triangles.reshape(-1, 3), axis=0, return_inverse=True)
+    index = index.reshape(-1, 3)
+    tails, heads = index.ravel(), np.roll(index, -1, axis=1).ravel()
+    n = int(index.max()) + 1
+    forward, count = np.unique(tails * n + heads, return_counts=True)
+    backward, count_back = np.unique(heads * n + tails, return_counts=True)
+    return bool(np.array_equal(forward, backward) and np.array_equal(count, count_back))
 
 
 def winding_numbers(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

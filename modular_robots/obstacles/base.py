@@ -107,6 +107,13 @@ class Obstacle(Protocol):
         distance can abort near contact: see :func:`~modular_robots.obstacles.sphere.capsule_sphere`)."""
         ...
 
+    # A closed-form shape whose queries cost more than a few NumPy calls (a mesh) may also give
+    # ``signed_distances(mid (N, 3), axis (N, 3), length (N,), radius (N,), deep=True)``:
+    # :meth:`signed_distance` of N capsules at once, as arrays (distances (N,), witness points and
+    # gradients (N, 3)); with ``deep=False`` the distance of a capsule whose axis meets the shape
+    # may be any value in [its distance, -radius] (the collision model then asks only whether a
+    # pair is too near). The collision model measures all its pairs of a query in one call.
+
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
         """Directions ``(K, O, 3)`` (not normalised) in which the signed distance grows when the

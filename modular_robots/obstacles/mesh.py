@@ -7,13 +7,16 @@ must reach, and a mesh obstacle is there to keep those. The distances are not FC
 the mesh would be reported clear, and its capsule-triangle distances (GJK) were off by up to
 1.2e-4 m and their directions by 2.5e-3 on 200 capsules near the CoBRA machine mesh, which the
 gradient would inherit. The shape measures every pair itself, exactly, with NumPy
-(:mod:`._triangles`): the distance from the capsule's axis to the nearest triangles (those whose
-bounding boxes and spheres may hold the nearest point), and, for an axis that crosses the surface
-or lies inside, the depth of its deepest point, found by sampling the axis and golden-section
-search. Each query looks at every triangle's bounds, so its time grows with the mesh's size
-(0.3 to 0.6 ms a pair for the 748 triangles of CoBRA's machine; :data:`~._stl.MAX_TRIANGLES`).
-Inside and outside are the generalised winding number's, which holds for meshes with small gaps
-or overlapping parts (a mesh that is not closed has no inside, and there its answer is a guess).
+(:mod:`._triangles`): the distance from the capsule's axis to the nearest triangles, and, for an
+axis that crosses the surface or lies inside, the depth of its deepest point, found by sampling
+the axis and golden-section search. Which triangles may be nearest is decided by bounds, first on
+groups of 16 neighbouring triangles, then on the triangles of the groups left
+(:mod:`._culling`), best first; the collision model asks for all the capsules of a query at once
+(:meth:`MeshObstacle.signed_distances`), so that NumPy's cost per call is paid once a query, not
+once a pair. Inside and outside are the generalised winding number's, which holds for meshes
+with small gaps or overlapping parts (a mesh that is not closed has no inside, and there its
+answer is a guess); for a closed mesh, the winding number is counted by a ray's crossings of the
+triangles near it, and by the solid angles of all of them only where a crossing is ambiguous.
 
 A signed distance is thus the smallest signed distance from the mesh of the capsule's axis,
 less the capsule's radius, as for the box and the cylinder; its gradient comes with it.
@@ -31,10 +34,18 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from ._culling import group_triangles, segment_lower_bounds
 from ._geometry import pose_columns, rpy_matrix
 from ._json import json_number, json_vector
 from ._stl import StlError, read_stl, welded
-from ._triangles import closest_on_triangles, segment_crossings, segment_triangles, winding_numbers
+from ._triangles import (
+    closest_on_triangles,
+    is_closed,
+    ray_crossings,
+    segment_crossings,
+    segment_triangles,
+    winding_numbers,
+)
 from .base import Obstacle, Witness, members
 from .box import BoxObstacle
 
@@ -50,12 +61,19 @@ SURFACE_SAMPLES = 64
 #: Points along a capsule's axis sampled for its deepest point, and the golden-section steps that
 #: refine the best two (the bracket shrinks to 0.618^60 = 3e-13 of two samples' spacing).
 _AXIS_SAMPLES, _SEARCH_STEPS = 32, 60
-#: Triangles measured first (those with the smallest distance bounds), whose nearest distance
-#: then bounds which others can be nearer.
-_FIRST = 8
+#: Steps after which the search culls the triangles anew for its shrunk brackets.
+_RECULL = 8
+#: Triangles in a group of :mod:`._culling`'s hierarchy; a query measures first the group with
+#: the smallest bound, whose nearest distance then bounds which others can be nearer.
+GROUP_SIZE = 16
+#: Groups a segment's query measures at once, nearest bound first.
+_BATCH = 4
 #: The most (point, triangle) pairs a query holds in its arrays at once.
 _PAIRS = 1_000_000
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
+#: The direction of the rays whose crossings count a closed mesh's winding number: oblique, so
+#: that it seldom runs along a machine's axis-aligned edges and faces.
+_RAY = np.array([0.8017, 0.3361, 0.4943]) / np.linalg.norm([0.8017, 0.3361, 0.4943])
 #: Triangles read, by (file, SHA-256): each file is parsed once per process.
 _read: dict[tuple[str, str], np.ndarray] = {}
 _read_lock = threading.Lock()
@@ -168,46 +186,55 @@ class MeshObstacle:
         return fcl.CollisionObject(model, fcl.Transform())
 
     @classmethod
-    def batch(cls, obstacles: Sequence[Obstacle]) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    def batch(cls, obstacles: Sequence[Obstacle]) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray, list]:
         """The bounding boxes as :class:`~.box.BoxObstacle`'s batch (centres, rotations, half
-        sizes [m]) and :data:`SURFACE_SAMPLES` surface points of each ``(O, S, 3)`` [m]."""
+        sizes [m]), :data:`SURFACE_SAMPLES` surface points of each ``(O, S, 3)`` [m], and the
+        meshes' geometries."""
         meshes = [o._geometry for o in members(obstacles, MeshObstacle)]
         boxes = (
             np.array([g.box_center for g in meshes]).reshape(-1, 3),
             np.array([g.box_rotation for g in meshes]).reshape(-1, 3, 3),
             np.array([g.box_half for g in meshes]).reshape(-1, 3),
         )
-        return boxes, np.array([g.samples for g in meshes]).reshape(-1, SURFACE_SAMPLES, 3)
+        return boxes, np.array([g.samples for g in meshes]).reshape(-1, SURFACE_SAMPLES, 3), meshes
 
     @classmethod
     def capsule_bounds(
         cls, batch: Any, axis: np.ndarray, mid: np.ndarray, half_length: np.ndarray, radius: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Below, the distance to the mesh's bounding box (which holds its inside); above, the
-        distance to the nearest of its surface samples."""
-        boxes, samples = batch
+        """Below, the larger of the distance to the mesh's bounding box (which holds its inside)
+        and, for an axis that clear of the surface and outside, the groups' bound
+        (:meth:`_Geometry.axis_bounds`); above, the distance to the nearest of the surface
+        samples and of the corners of the group nearest in bound."""
+        boxes, samples, meshes = batch
         lower = BoxObstacle.capsule_bounds(boxes, axis, mid, half_length, radius)[0]
         offset = samples[None, None] - mid[:, :, None, None]  # (K, P, O, S, 3)
         half = half_length[None, :, None, None]
         along = np.clip(np.einsum("kposc,kpc->kpos", offset, axis), -half, half)
         apart = np.linalg.norm(offset - along[..., None] * axis[:, :, None, None], axis=-1)
-        return lower, apart.min(axis=-1) - radius[None, :, None]
+        upper = apart.min(axis=-1) - radius[None, :, None]
+        start = (mid - half_length[None, :, None] * axis).reshape(-1, 3)
+        direction = (2.0 * half_length[None, :, None] * axis).reshape(-1, 3)
+        for o, g in enumerate(meshes):
+            below, above = (b.reshape(mid.shape[:2]) - radius for b in g.axis_bounds(start, direction))
+            lower[..., o], upper[..., o] = np.maximum(lower[..., o], below), np.minimum(upper[..., o], above)
+        return lower, upper
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
-        g = self._geometry
-        axis = np.asarray(axis, dtype=float)
-        start, direction = np.asarray(mid, dtype=float) - 0.5 * length * axis, length * axis
-        on_axis, on_mesh = g.closest(start, direction)
-        gap = float(np.linalg.norm(on_axis - on_mesh))
-        if gap > 1e-9 * g.size and not g.inside(on_axis[None])[0]:  # wholly outside
-            normal = (on_axis - on_mesh) / gap
-            return gap - radius, on_axis - radius * normal, on_mesh, normal
-        t, inside = g.deepest(start, direction)
-        point = start + t * direction
-        depth, gradient, on_surface = g.gradient(point, inside, direction)
-        size = float(np.linalg.norm(gradient))
-        across = gradient / size if size > 0.0 else g.normals[g.nearest(point[None])[2][0]]
-        return depth - radius, point - radius * across, on_surface, gradient
+        one = (np.reshape(mid, (1, 3)), np.reshape(axis, (1, 3)), np.array([length]), np.array([radius]))
+        distance, on_robot, on_mesh, gradient = self.signed_distances(*one)
+        return float(distance[0]), on_robot[0], on_mesh[0], gradient[0]
+
+    def signed_distances(
+        self, mid: np.ndarray, axis: np.ndarray, length: np.ndarray, radius: np.ndarray, deep: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`signed_distance` of ``N`` capsules at once (``mid``, ``axis`` ``(N, 3)``,
+        ``length``, ``radius`` ``(N,)``): distances ``(N,)``, witness points on the robot and on
+        the mesh and gradients ``(N, 3)``. The axes clear of the surface are measured together;
+        one that crosses it or lies inside, on its own (:meth:`_Geometry.deepest`), or, if not
+        ``deep``, not at all: its distance is then ``-radius``, above its own (the axis meets
+        the mesh), and its witnesses and gradient NaN."""
+        return self._geometry.signed_distances(mid, axis, length, radius, deep)
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
@@ -239,7 +266,7 @@ class MeshObstacle:
 class _Geometry:
     """A mesh obstacle's triangles in the base frame and the queries the obstacle makes of them."""
 
-    def __init__(self, triangles: np.ndarray):
+    def __init__(self, triangles: np.ndarray, group_size: int = GROUP_SIZE):
         triangles = triangles[_areas(triangles) > 0.0]  # a triangle of no area holds no point its edges miss
         self.a, self.b, self.c = (np.ascontiguousarray(triangles[:, i]) for i in range(3))
         volume = float(np.einsum("tc,tc->", self.a, np.cross(self.b, self.c))) / 6.0
@@ -258,63 +285,159 @@ class _Geometry:
         self.sphere_center = self.box_center
         self.sphere_radius = float(np.linalg.norm(vertices - self.box_center, axis=1).max())
         self.samples = _spread(vertices, SURFACE_SAMPLES)
+        self.groups = group_triangles(triangles, group_size)
+        #: Whether the mesh closes (:func:`._triangles.is_closed`): then a ray's crossings count
+        #: its winding number, and only the triangles near the ray are asked.
+        self.closed = is_closed(triangles)
 
-    def _lower(self, start: np.ndarray, direction: np.ndarray) -> np.ndarray:
-        """Lower bounds ``(..., T)`` on the distance from segments (``start`` and ``direction``
-        ``(..., 3)``) to each triangle: the larger of the gap between their boxes and the
-        distance to the triangle's centroid less its reach."""
-        end = start + direction
-        low, high = np.minimum(start, end)[..., None, :], np.maximum(start, end)[..., None, :]
-        gap = np.maximum(np.maximum(self.low - high, low - self.high), 0.0)
-        offset = self.centroid - start[..., None, :]
-        span = np.einsum("...c,...c->...", direction, direction)[..., None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.clip(np.einsum("...tc,...c->...t", offset, direction) / span, 0.0, 1.0)
-        t = np.where(span > 0.0, t, 0.0)
-        apart = np.linalg.norm(offset - t[..., None] * direction[..., None, :], axis=-1)
-        return np.maximum(np.sqrt(np.einsum("...c,...c->...", gap, gap)), apart - self.reach)
+    def signed_distances(
+        self, mid: np.ndarray, axis: np.ndarray, length: np.ndarray, radius: np.ndarray, deep: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`MeshObstacle.signed_distances` (this mesh's triangles)."""
+        mid, axis = np.asarray(mid, dtype=float), np.asarray(axis, dtype=float)
+        length, radius = np.asarray(length, dtype=float), np.asarray(radius, dtype=float)
+        start, direction = mid - 0.5 * length[:, None] * axis, length[:, None] * axis
+        on_axis, on_mesh = self.closest(start, direction)
+        gap = np.linalg.norm(on_axis - on_mesh, axis=1)
+        outside = gap > 1e-9 * self.size
+        outside[outside] = ~self.inside(on_axis[outside])
+        normal = np.zeros_like(on_axis)
+        normal[outside] = (on_axis - on_mesh)[outside] / gap[outside, None]
+        distance, on_robot, gradient = gap - radius, on_axis - radius[:, None] * normal, normal
+        meets = np.flatnonzero(~outside)
+        if not deep:
+            distance[meets], on_robot[meets], on_mesh[meets], gradient[meets] = -radius[meets], np.nan, np.nan, np.nan
+            return distance, on_robot, on_mesh, gradient
+        at, within = self.deepest(start[meets], direction[meets]) if meets.size else (np.empty(0), np.empty(0, bool))
+        for n, t, inside in zip(meets, at, within):  # wholly outside: as above; else its deepest point
+            point = start[n] + t * direction[n]
+            depth, gradient[n], on_mesh[n] = self.gradient(point, inside, direction[n])
+            size = float(np.linalg.norm(gradient[n]))
+            across = gradient[n] / size if size > 0.0 else self.normals[self.nearest(point[None])[2][0]]
+            distance[n], on_robot[n] = depth - radius[n], point - radius[n] * across
+        return distance, on_robot, on_mesh, gradient
+
+    def _near(self, start: np.ndarray, direction: np.ndarray, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The (segment, triangle) pairs, two index arrays, whose triangle may lie within
+        ``limit`` ``(M,)`` [m] of the segment (``start``, ``direction`` ``(M, 3)``): those whose
+        group's bound and own bound are both within it (:mod:`._culling`); a triangle once."""
+        g = self.groups
+        bound = segment_lower_bounds(start, direction, g.low, g.high, g.centre, g.reach)
+        row, group = np.nonzero(bound <= limit[:, None])
+        pair = np.unique(np.repeat(row, g.members.shape[1]) * len(self.a) + g.members[group].ravel())
+        row, triangle = np.divmod(pair, len(self.a))
+        box = (v[triangle][:, None] for v in (self.low, self.high, self.centroid, self.reach))
+        keep = segment_lower_bounds(start[row], direction[row], *box)[:, 0] <= limit[row]
+        return row[keep], triangle[keep]
 
     def closest(self, start: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The closest points of a segment and the surface: on the segment and on the surface.
-        The triangles with the smallest lower bounds are measured first; their nearest distance
-        then leaves only the triangles whose bound is below it to measure."""
-        lower = self._lower(start, direction)
-        first = np.argpartition(lower, _FIRST)[:_FIRST] if len(lower) > _FIRST else np.arange(len(lower))
-        on_segment, on_surface = segment_triangles(start, direction, self.a[first], self.b[first], self.c[first])
-        gaps = np.linalg.norm(on_segment - on_surface, axis=1)
-        best = int(np.argmin(gaps))
-        lower[first] = np.inf
-        rest = np.flatnonzero(lower <= gaps[best])
-        if rest.size:
-            more = segment_triangles(start, direction, self.a[rest], self.b[rest], self.c[rest])
-            more_gaps = np.linalg.norm(more[0] - more[1], axis=1)
-            k = int(np.argmin(more_gaps))
-            if more_gaps[k] < gaps[best]:
-                return more[0][k], more[1][k]
-        return on_segment[best], on_surface[best]
+        """The closest points of segments ``start``, ``direction`` ``(N, 3)`` and the surface:
+        on the segments and on the surface ``(N, 3)`` each (:meth:`_pairs`)."""
+
+        def measure(row: np.ndarray, triangle: np.ndarray):
+            on = segment_triangles(start[row], direction[row], self.a[triangle], self.b[triangle], self.c[triangle])
+            return np.linalg.norm(on[0] - on[1], axis=1), on
+
+        row, (on_segment, on_surface) = self._pairs(start, direction, measure)
+        return on_segment[row], on_surface[row]
 
     def nearest(self, points: np.ndarray, among: np.ndarray | None = None):
         """Distances ``(M,)`` [m] from points ``(M, 3)`` to the surface (``among``: only these
         triangles), the nearest surface points ``(M, 3)`` and the triangles that hold them."""
-        chunk = max(1, _PAIRS // len(self.a))
+        if among is None:
+
+            def measure(row: np.ndarray, triangle: np.ndarray):
+                on = closest_on_triangles(points[row], *(v[triangle][:, None] for v in (self.a, self.b, self.c)))[:, 0]
+                return np.linalg.norm(points[row] - on, axis=1), (on, triangle)
+
+            head, (distance, (on, triangle)) = self._pairs(points, np.zeros_like(points), measure, both=True)
+            return distance[head], on[head], triangle[head]
+        chunk = max(1, _PAIRS // max(1, len(among)))
         if len(points) > chunk:  # a few points at a time: arrays of (points, triangles, 3)
             parts = [self.nearest(points[i : i + chunk], among) for i in range(0, len(points), chunk)]
             return tuple(np.concatenate(p) for p in zip(*parts))
-        if among is None:
-            lower = self._lower(points, np.zeros_like(points))  # (M, T)
-            first = np.unique(np.argpartition(lower, _FIRST, axis=1)[:, :_FIRST]) if lower.shape[1] > _FIRST else None
-            if first is not None:
-                bound = np.linalg.norm(
-                    points[:, None] - closest_on_triangles(points, self.a[first], self.b[first], self.c[first]), axis=2
-                ).min(axis=1)
-                among = np.flatnonzero((lower <= bound[:, None]).any(axis=0))
-            else:
-                among = np.arange(len(self.a))
         closest = closest_on_triangles(points, self.a[among], self.b[among], self.c[among])  # (M, N, 3)
         distance = np.linalg.norm(points[:, None] - closest, axis=2)
         best = np.argmin(distance, axis=1)
         rows = np.arange(len(points))
         return distance[rows, best], closest[rows, best], among[best]
+
+    def _pairs(self, start: np.ndarray, direction: np.ndarray, measure, both: bool = False):
+        """Each segment's (``start``, ``direction`` ``(N, 3)``) nearest triangle, by
+        ``measure(rows, triangles)`` (distances of the pairs and what goes with them, a tuple of
+        arrays). Best first: each segment's groups in the order of their bounds, one group, then
+        two, four and so on at a time, those whose bound is within the nearest distance found so
+        far, and of them the triangles whose own bound is. Returns the index of each segment's
+        nearest pair and what ``measure`` gave (with the distances if ``both``)."""
+        g, size = self.groups, self.groups.members.shape[1]
+        bound = segment_lower_bounds(start, direction, g.low, g.high, g.centre, g.reach)  # (N, G)
+        order = np.argsort(bound, axis=1)
+        bound = np.take_along_axis(bound, order, axis=1)
+        limit = np.full(len(start), np.inf)
+        rows, distances, founds = [], [], []
+        column, width = 0, 1
+        while column < bound.shape[1]:
+            window = slice(column, column + width)
+            row, k = np.nonzero(bound[:, window] <= limit[:, None])
+            if not row.size:
+                break  # every segment's next group is farther than what it has found
+            row, triangle = np.repeat(row, size), g.members[order[:, window][row, k]].ravel()
+            box = (v[triangle][:, None] for v in (self.low, self.high, self.centroid, self.reach))
+            keep = segment_lower_bounds(start[row], direction[row], *box)[:, 0] <= limit[row]
+            row, triangle = row[keep], triangle[keep]
+            distance, found = measure(row, triangle)
+            np.minimum.at(limit, row, distance + 1e-12 * self.size)  # a bound rounded above its distance
+            rows.append(row)
+            distances.append(distance)
+            founds.append(found)
+            column, width = column + width, 2 * width
+        row, distance = np.concatenate(rows), np.concatenate(distances)
+        found = tuple(np.concatenate(part) for part in zip(*founds))
+        order = np.lexsort((distance, row))
+        head = order[np.flatnonzero(np.diff(row[order], prepend=-1))]  # each segment's nearest
+        return head, ((distance, found) if both else found)
+
+    def axis_bounds(self, start: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds ``(N,)`` [m] on the signed distance of segments ``start``, ``direction``
+        ``(N, 3)`` from the mesh: below, the smallest of the groups' bounds where it is above 0
+        and the segment's start outside (then the whole segment is: it meets no triangle), else
+        ``-inf``; above, the distance to the nearest corner of the group nearest in bound."""
+        g = self.groups
+        bound = segment_lower_bounds(start, direction, g.low, g.high, g.centre, g.reach)
+        nearest = np.argmin(bound, axis=1)
+        lower = bound[np.arange(len(bound)), nearest]
+        clear = lower > 0.0
+        clear[clear] = ~self.inside(start[clear])
+        corners = np.concatenate([v[g.members[nearest]] for v in (self.a, self.b, self.c)], axis=1)  # (N, 3S, 3)
+        span = np.einsum("nc,nc->n", direction, direction)[:, None]
+        offset = corners - start[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(span > 0.0, np.clip(np.einsum("nsc,nc->ns", offset, direction) / span, 0.0, 1.0), 0.0)
+        upper = np.linalg.norm(offset - t[..., None] * direction[:, None], axis=2).min(axis=1)
+        return np.where(clear, lower, -np.inf), upper
+
+    def winding(self, points: np.ndarray) -> np.ndarray:
+        """The winding number ``(M,)`` at each point ``(M, 3)``: of a closed mesh, the crossings
+        of a ray from the point out of the mesh's box (the generalised winding number where a
+        crossing is ambiguous); else the generalised winding number."""
+        if not self.closed:
+            return winding_numbers(points, self.a, self.b, self.c)
+        g = self.groups
+        offset = points - self.box_center
+        ray = np.where(offset < 0.0, -_RAY, _RAY)  # away from the centre: out of the box soonest
+        room = np.maximum(self.box_half - np.abs(offset), 0.0) / _RAY
+        ray = ray * (room.min(axis=1) + 1e-3 * self.size)[:, None]  # to just beyond the box
+        bound = segment_lower_bounds(points, ray, g.low, g.high, g.centre, g.reach)
+        point, group = np.nonzero(bound <= 0.0)
+        pairs = np.unique(np.repeat(point, g.members.shape[1]) * len(self.a) + g.members[group].ravel())
+        point, triangle = np.divmod(pairs, len(self.a))
+        corners = (self.a[triangle], self.b[triangle], self.c[triangle])
+        change, ambiguous = ray_crossings(points[point], ray[point], *corners)
+        out = -np.bincount(point, weights=change, minlength=len(points))
+        unsure = np.unique(point[ambiguous])
+        if unsure.size:
+            out[unsure] = winding_numbers(points[unsure], self.a, self.b, self.c)
+        return out
 
     def inside(self, points: np.ndarray) -> np.ndarray:
         """Whether each point ``(M, 3)`` is inside: a winding number of magnitude 1/2 or more
@@ -322,46 +445,60 @@ class _Geometry:
         out = np.zeros(len(points), dtype=bool)
         near = np.all(np.abs(points - self.box_center) <= self.box_half, axis=1)
         if near.any():
-            out[near] = np.abs(winding_numbers(points[near], self.a, self.b, self.c)) >= 0.5
+            out[near] = np.abs(self.winding(points[near])) >= 0.5
         return out
 
-    def deepest(self, start: np.ndarray, direction: np.ndarray) -> tuple[float, bool]:
-        """The parameter in [0, 1] of the segment's point of smallest signed distance, and
-        whether that point is inside: the best of :data:`_AXIS_SAMPLES` + 1 samples, refined by
-        golden-section search between the neighbours of the two best samples that are local
-        minima. Inside and outside along the segment: the winding number at its start, changed
-        by one at each triangle the segment crosses."""
-        start_winding = float(winding_numbers(start[None], self.a, self.b, self.c)[0])
-        if not np.any(direction):
-            return 0.0, abs(start_winding) >= 0.5
-        crossings, jumps = segment_crossings(start, direction, self.a, self.b, self.c)
-        crossed = ~np.isnan(crossings)
-        crossings, jumps = crossings[crossed], jumps[crossed]
+    def deepest(self, start: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For segments ``start``, ``direction`` ``(M, 3)``, the parameter in [0, 1] of each one's
+        point of smallest signed distance and whether that point is inside, ``(M,)`` each: the
+        best of :data:`_AXIS_SAMPLES` + 1 samples, refined by golden-section search between the
+        neighbours of the two best samples that are local minima (all segments' searches in
+        step). Inside and outside along a segment: the winding number at its start, changed by
+        one at each triangle the segment crosses."""
+        count, length = len(start), np.linalg.norm(direction, axis=1)
+        start_winding = self.winding(start)
+        row, triangle = self._near(start, direction, np.zeros(count))  # a crossing is at no distance
+        at, jump = segment_crossings(start[row], direction[row], self.a[triangle], self.b[triangle], self.c[triangle])
+        crossed = ~np.isnan(at)
+        row, at, jump = row[crossed], at[crossed], jump[crossed]
 
-        def inside(t: np.ndarray) -> np.ndarray:
-            return np.abs(start_winding + (jumps * (crossings <= t[:, None])).sum(axis=1)) >= 0.5
+        def inside(rows: np.ndarray, t: np.ndarray) -> np.ndarray:
+            passed = (row[None] == rows[:, None]) & (at[None] <= t[:, None])
+            return np.abs(start_winding[rows] + passed @ jump) >= 0.5
 
         t = np.linspace(0.0, 1.0, _AXIS_SAMPLES + 1)
-        distance = self.nearest(start + t[:, None] * direction)[0]
-        f = np.where(inside(t), -distance, distance)
-        padded = np.concatenate([[np.inf], f, [np.inf]])
-        minima = np.flatnonzero((f <= padded[:-2]) & (f <= padded[2:]))
-        seeds = minima[np.argsort(f[minima])[:2]]
-        low, high = t[np.maximum(seeds - 1, 0)], t[np.minimum(seeds + 1, _AXIS_SAMPLES)]
+        every = np.repeat(np.arange(count), len(t))
+        distance = self.nearest((start[:, None] + t[:, None] * direction[:, None]).reshape(-1, 3))[0]
+        f = np.where(inside(every, np.tile(t, count)), -distance, distance).reshape(count, -1)
+        distance = distance.reshape(count, -1)
+        padded = np.pad(f, ((0, 0), (1, 1)), constant_values=np.inf)
+        minimum = (f <= padded[:, :-2]) & (f <= padded[:, 2:])
+        ranked = np.argsort(np.where(minimum, f, np.inf), axis=1, kind="stable")[:, :2]
+        seeds = np.where(minimum[np.arange(count)[:, None], ranked], ranked, ranked[:, :1])  # one minimum: twice
+        seeds = seeds.ravel()
+        owner = np.repeat(np.arange(count), 2)
+        before, after = np.maximum(seeds - 1, 0), np.minimum(seeds + 1, _AXIS_SAMPLES)
+        low, high = t[before], t[after]
         # the triangles that may be nearest to a point between two samples' neighbours: nearer
         # than the samples' distance plus half the bracket's length (the distance is 1-Lipschitz)
-        within = np.maximum(distance[np.maximum(seeds - 1, 0)], distance[np.minimum(seeds + 1, _AXIS_SAMPLES)])
-        within = within + 0.5 * (high - low) * float(np.linalg.norm(direction))
-        bracket = self._lower(start + low[:, None] * direction, (high - low)[:, None] * direction)
-        among = np.flatnonzero((bracket <= within[:, None]).any(axis=0))
+        within = np.maximum(distance[owner, before], distance[owner, after]) + 0.5 * (high - low) * length[owner]
+        at_start, along_axis = start[owner], direction[owner]
+        pairs = self._near(at_start + low[:, None] * along_axis, (high - low)[:, None] * along_axis, within)
 
         def along(s: np.ndarray) -> np.ndarray:
-            d = self.nearest(start + s[:, None] * direction, among)[0]
-            return np.where(inside(s), -d, d)
+            bracket, tri = pairs
+            points = at_start[bracket] + s[bracket, None] * along_axis[bracket]
+            on = closest_on_triangles(points, *(v[tri][:, None] for v in (self.a, self.b, self.c)))[:, 0]
+            d = np.full(len(s), np.inf)
+            np.minimum.at(d, bracket, np.linalg.norm(points - on, axis=1))
+            return np.where(inside(owner, s), -d, d)
 
         a, b = high - _GOLD * (high - low), low + _GOLD * (high - low)
         fa, fb = along(a), along(b)
-        for _ in range(_SEARCH_STEPS):
+        for step in range(1, _SEARCH_STEPS + 1):
+            if step % _RECULL == 0:  # the brackets have shrunk: fewer triangles can be nearest
+                within = np.minimum(np.abs(fa), np.abs(fb)) + (high - low) * length[owner]
+                pairs = self._near(at_start + low[:, None] * along_axis, (high - low)[:, None] * along_axis, within)
             left = fa <= fb
             high, low = np.where(left, b, high), np.where(left, low, a)
             new = np.where(left, high - _GOLD * (high - low), low + _GOLD * (high - low))
@@ -372,10 +509,12 @@ class _Geometry:
                 np.where(left, fnew, fb),
                 np.where(left, fa, fnew),
             )
-        found = np.concatenate([0.5 * (low + high), t[seeds]])
-        values = np.concatenate([along(found[: len(seeds)]), f[seeds]])
-        best = int(np.argmin(values))
-        return float(found[best]), bool(inside(found[best : best + 1])[0])
+        middle = 0.5 * (low + high)
+        found = np.concatenate([middle.reshape(count, 2), t[seeds].reshape(count, 2)], axis=1)
+        values = np.concatenate([along(middle).reshape(count, 2), f[owner, seeds].reshape(count, 2)], axis=1)
+        best = found[np.arange(count), np.argmin(values, axis=1)]
+        best = np.where(length > 0.0, best, 0.0)
+        return best, inside(np.arange(count), best)
 
     def gradient(self, point: np.ndarray, inside: bool, direction: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """The signed distance [m] at ``point``, an axis's deepest point, its gradient with respect
@@ -390,7 +529,7 @@ class _Geometry:
         if not inside:
             return distance, (point - on_surface) / distance, on_surface
         level_with = distance + 1e-9 * max(1.0, self.size)  # the search's point is as near the kink
-        near = np.flatnonzero(self._lower(point, np.zeros(3)) <= level_with)
+        near = self._near(point[None], np.zeros((1, 3)), np.array([level_with]))[1]
         closest = closest_on_triangles(point[None], self.a[near], self.b[near], self.c[near])[0]
         gaps = np.linalg.norm(closest - point, axis=1)
         toward = (closest - point) / gaps[:, None]  # the gradients of the triangles' -distance
