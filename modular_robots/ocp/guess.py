@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..collision import CollisionModel
+from ..collision import PATH_CLEARANCE, CollisionModel
 from ..robot import RobotModel
 from .transcription import positive_or_one
 
@@ -56,9 +56,15 @@ def detour_path(
     trials: int = GUESS_TRIALS,
 ) -> np.ndarray:
     """The straight line ``(q_start, q_goal)`` if it clears the obstacles, else the fastest of
-    ``trials`` seeded random one-via detours that does (the straight line if none does)."""
+    ``trials`` seeded random one-via detours that does (the straight line if none does). Clear:
+    by :data:`~modular_robots.collision.PATH_CLEARANCE`, or by half an end's clearance where that
+    is smaller (a goal inside a machine, 6 mm from it: no path would keep 2 cm)."""
     straight = np.array([q_start, q_goal], dtype=float)
-    if collision is None or collision.path_clear(straight):
+    if collision is None:
+        return straight
+    ends = min(collision.min_distance(straight[0]), collision.min_distance(straight[-1]))
+    clearance = min(PATH_CLEARANCE, max(0.5 * ends, 0.0))
+    if collision.path_clear(straight, clearance):
         return straight
     rng = np.random.default_rng(0)
     lo = np.where(np.isfinite(robot.lower), robot.lower, -np.pi)
@@ -67,7 +73,7 @@ def detour_path(
     for _ in range(trials):
         path = np.array([q_start, rng.uniform(lo, hi), q_goal])
         duration = path_times(robot, path).sum()
-        if duration < best_time and collision.path_clear(path):
+        if duration < best_time and collision.path_clear(path, clearance):
             best_time, best = duration, path
     return best
 
