@@ -109,3 +109,19 @@ def test_axis_bounds_hold_the_signed_distance_of_the_axis(name):
     signed = np.array(signed)
     assert np.all(lower <= signed + 1e-12) and np.all(signed <= upper + 1e-12)
     assert np.isfinite(lower[signed > 0.0]).mean() > 0.2  # a bound above -inf for axes clear of the mesh
+
+
+def test_no_capsules_measure_nothing_and_a_shallow_answer_never_understates():
+    g = _Geometry(_triangles("QUASER"))
+    empty = g.signed_distances(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+    assert [a.shape[0] for a in empty] == [0, 0, 0, 0]
+    start, direction = _segments(g, 150, seed=4)
+    length = np.linalg.norm(direction, axis=1)
+    axis = np.where(length[:, None] > 0.0, direction / np.maximum(length, 1e-300)[:, None], [0.0, 0.0, 1.0])
+    mid, radius = start + 0.5 * direction, np.full(len(start), 0.05)
+    deep = g.signed_distances(mid, axis, length, radius)[0]
+    shallow = g.signed_distances(mid, axis, length, radius, deep=False)[0]
+    meets = deep < -radius + 1e-12
+    assert 10 < meets.sum() < len(deep)  # axes in or across the mesh, and clear of it
+    np.testing.assert_array_equal(shallow[~meets], deep[~meets])
+    assert np.all(shallow >= deep - 1e-15) and np.all(shallow[meets] <= 1e-9 * g.size - radius[meets])

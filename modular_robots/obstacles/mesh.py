@@ -232,8 +232,8 @@ class MeshObstacle:
         ``length``, ``radius`` ``(N,)``): distances ``(N,)``, witness points on the robot and on
         the mesh and gradients ``(N, 3)``. The axes clear of the surface are measured together;
         one that crosses it or lies inside, on its own (:meth:`_Geometry.deepest`), or, if not
-        ``deep``, not at all: its distance is then ``-radius``, above its own (the axis meets
-        the mesh), and its witnesses and gradient NaN."""
+        ``deep``, not at all: its distance is then ``-radius`` (or the touching axis's gap less
+        the radius), no smaller than its own, and its witnesses and gradient NaN."""
         return self._geometry.signed_distances(mid, axis, length, radius, deep)
 
     @classmethod
@@ -306,7 +306,9 @@ class _Geometry:
         distance, on_robot, gradient = gap - radius, on_axis - radius[:, None] * normal, normal
         meets = np.flatnonzero(~outside)
         if not deep:
-            distance[meets], on_robot[meets], on_mesh[meets], gradient[meets] = -radius[meets], np.nan, np.nan, np.nan
+            touching = gap[meets] <= 1e-9 * self.size  # crossing (gap 0) or touching from outside
+            distance[meets] = np.where(touching, gap[meets], 0.0) - radius[meets]
+            on_robot[meets], on_mesh[meets], gradient[meets] = np.nan, np.nan, np.nan
             return distance, on_robot, on_mesh, gradient
         at, within = self.deepest(start[meets], direction[meets]) if meets.size else (np.empty(0), np.empty(0, bool))
         for n, t, inside in zip(meets, at, within):  # wholly outside: as above; else its deepest point
@@ -370,6 +372,9 @@ class _Geometry:
         far, and of them the triangles whose own bound is. Returns the index of each segment's
         nearest pair and what ``measure`` gave (with the distances if ``both``)."""
         g, size = self.groups, self.groups.members.shape[1]
+        if not len(start):
+            empty = measure(np.zeros(0, dtype=int), np.zeros(0, dtype=int))
+            return np.zeros(0, dtype=int), (empty if both else empty[1])
         bound = segment_lower_bounds(start, direction, g.low, g.high, g.centre, g.reach)  # (N, G)
         order = np.argsort(bound, axis=1)
         bound = np.take_along_axis(bound, order, axis=1)

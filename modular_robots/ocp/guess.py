@@ -57,13 +57,13 @@ def detour_path(
 ) -> np.ndarray:
     """The straight line ``(q_start, q_goal)`` if it clears the obstacles, else the fastest of
     ``trials`` seeded random one-via detours that does (the straight line if none does). Clear:
-    by :data:`~modular_robots.collision.PATH_CLEARANCE`, or by half an end's clearance where that
-    is smaller (a goal inside a machine, 6 mm from it: no path would keep 2 cm)."""
+    by :data:`~modular_robots.collision.PATH_CLEARANCE`, or, where an end is nearer an obstacle
+    than that, by half its clearance (a goal inside a machine, 6 mm from it: no path keeps 2 cm)."""
     straight = np.array([q_start, q_goal], dtype=float)
     if collision is None:
         return straight
     ends = min(collision.min_distance(straight[0]), collision.min_distance(straight[-1]))
-    clearance = min(PATH_CLEARANCE, max(0.5 * ends, 0.0))
+    clearance = PATH_CLEARANCE if ends >= PATH_CLEARANCE else max(0.5 * ends, 0.0)
     if collision.path_clear(straight, clearance):
         return straight
     rng = np.random.default_rng(0)
