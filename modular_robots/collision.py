@@ -237,7 +237,7 @@ class CollisionModel:
             ks, iis = np.nonzero(measure[:, :, j])
             if ks.size:
                 measure[ks, iis, j] = False
-                d, pr, po, g = many(mid[ks, iis], rot[ks, iis, :, 2], self._prim_lengths[iis], self._prim_radii[iis])
+                d, pr, po, g = many(*self._capsules(mid[ks, iis], rot[ks, iis], iis))
                 dist[ks, iis, j], on_robot[ks, iis, j], on_obstacle[ks, iis, j], given[ks, iis, j] = d, pr, po, g
         ks, iis, js = np.nonzero(measure)  # grouped by (k, i): each primitive is placed once
         found, placed = [], None
@@ -274,6 +274,11 @@ class CollisionModel:
         if self._applies is not None:  # an obstacle no primitive here is kept from: no gradient
             grad[~np.isfinite(closest)] = 0.0
         return closest, grad
+
+    def _capsules(self, mid: np.ndarray, rot: np.ndarray, primitives: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The capsules of ``primitives`` placed at ``mid`` ``(N, 3)`` and ``rot`` ``(N, 3, 3)``:
+        midpoints, axes, lengths and radii, as a shape's ``signed_distances`` takes them."""
+        return mid, rot[..., 2], self._prim_lengths[primitives], self._prim_radii[primitives]
 
     def _bounds(self, rot: np.ndarray, mid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds [m] on the signed distance of every (primitive, obstacle)
@@ -349,7 +354,7 @@ class CollisionModel:
             rows = np.flatnonzero(np.isfinite(lower[:, j]) & (lower[:, j] <= upper.min() + _BOUND_SLACK))
             lower[:, j] = math.inf
             if rows.size:
-                d = many(mid[rows], rot[rows, :, 2], self._prim_lengths[rows], self._prim_radii[rows])[0]
+                d = many(*self._capsules(mid[rows], rot[rows], rows))[0]
                 if d.min() < best:
                     best, pair = float(d.min()), (int(rows[np.argmin(d)]), j)
         placed = None
@@ -397,9 +402,8 @@ class CollisionModel:
             undecided[:, :, j] = False
             if not ks.size:
                 continue
-            radii = self._prim_radii[iis]
-            deep = bool(np.any(-radii >= clearance))
-            if np.any(many(mid[ks, iis], rot[ks, iis, :, 2], self._prim_lengths[iis], radii, deep)[0] < clearance):
+            deep = bool(np.any(-self._prim_radii[iis] >= clearance))
+            if np.any(many(*self._capsules(mid[ks, iis], rot[ks, iis], iis), deep)[0] < clearance):
                 return False
         placed = None
         for k, i, j in zip(*(index.tolist() for index in np.nonzero(undecided))):

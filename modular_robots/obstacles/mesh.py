@@ -427,15 +427,11 @@ class _Geometry:
         crossing is ambiguous); else the generalised winding number."""
         if not self.closed:
             return winding_numbers(points, self.a, self.b, self.c)
-        g = self.groups
         offset = points - self.box_center
         ray = np.where(offset < 0.0, -_RAY, _RAY)  # away from the centre: out of the box soonest
         room = np.maximum(self.box_half - np.abs(offset), 0.0) / _RAY
         ray = ray * (room.min(axis=1) + 1e-3 * self.size)[:, None]  # to just beyond the box
-        bound = segment_lower_bounds(points, ray, g.low, g.high, g.centre, g.reach)
-        point, group = np.nonzero(bound <= 0.0)
-        pairs = np.unique(np.repeat(point, g.members.shape[1]) * len(self.a) + g.members[group].ravel())
-        point, triangle = np.divmod(pairs, len(self.a))
+        point, triangle = self._near(points, ray, np.zeros(len(points)))  # a crossing is at no distance
         corners = (self.a[triangle], self.b[triangle], self.c[triangle])
         change, ambiguous = ray_crossings(points[point], ray[point], *corners)
         out = -np.bincount(point, weights=change, minlength=len(points))
