@@ -1,6 +1,6 @@
 """Run every benchmark: ``python -m benchmarks`` (``make bench``); ``python -m benchmarks NAME ...``
 runs only those (models, feasibility, run, profile, ocp, ipopt, pruning, margins, suite, timor,
-engines, search, costs, goals, mesh). RESULTS.md is rewritten at the end.
+engines, search, costs, goals, mesh, nodes). RESULTS.md is rewritten at the end.
 
 Like the package's workers, the benchmarks' own process uses one BLAS thread, so that a solve
 timed here is the solve a run does."""
@@ -18,6 +18,7 @@ from . import (
     bench_margins,
     bench_mesh,
     bench_models,
+    bench_nodes,
     bench_ocp,
     bench_profile,
     bench_pruning,
@@ -44,6 +45,7 @@ BENCHES = {
     "costs": bench_costs,
     "goals": bench_goals,
     "mesh": bench_mesh,
+    "nodes": bench_nodes,
 }
 
 with single_threaded_blas():

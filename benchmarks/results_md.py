@@ -535,6 +535,7 @@ def build() -> str:
         lines.append("")
     lines += _profile_lines()
     lines += _ipopt_lines()
+    lines += _nodes_lines()
     if pruning:
         lines += [
             "## Step D (pruning vs brute force)",
@@ -657,6 +658,38 @@ def _mesh_lines() -> list[str]:
     lines += [
         f"| {r['queries']} | {r['pairs_a_call']} | {r['ms_a_pair']:.3f} | {r['axes_meeting_mesh']} of {r['pairs']} |"
         for r in doc["rows"]
+    ]
+    return lines + [""]
+
+
+def _nodes_lines() -> list[str]:
+    """Step C's time per iteration against the shooting nodes (``bench_nodes.py``)."""
+    doc = _load("nodes")
+    if not doc:
+        return []
+    fits = doc["exponents"]
+    lines = [
+        "## Step C as the nodes grow",
+        "",
+        _measured(doc),
+        "Time per trust-constr iteration on the six OCP benchmark candidates (medians) at 8 to 64 shooting "
+        f"nodes: whole solves with the projections' default factorisation (dense below {doc['banded_from']} "
+        f"unknowns, a band with a border above), and their first {doc['dense_iterations']} iterations with "
+        "that and with the dense LU forced. `projection ms` is the projections' factorisations and solves; "
+        "`solves` the projections' solves per iteration (trust-constr's projected CG takes more steps as "
+        "the nodes grow).",
+        "",
+        f"Fit of log(ms per iteration) on log(nodes): whole solves **N^{doc['exponent']:.2f}**; first "
+        f"iterations N^{fits['first iterations']:.2f}, with the dense LU forced "
+        f"N^{fits['first iterations, dense LU']:.2f}.",
+        "",
+        "| run | nodes | variables | iterations (6) | optimal | ms per iteration | projection ms | solves |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['run']} | {r['nodes']} | {r['variables']} | {r['iterations']} | {r['optimal']} | "
+        f"{r['ms_per_iteration']:.1f} | {r['projection_ms_per_iteration']:.1f} | {r['solves_per_iteration']:.1f} |"
+        for r in doc["summary"]
     ]
     return lines + [""]
 

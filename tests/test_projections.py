@@ -6,6 +6,7 @@ from 1e-9 (a row at its bound near convergence) to 1e3 (a far bound)."""
 from __future__ import annotations
 
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -53,10 +54,11 @@ def random_case(seed: int, ny: int = 30, me: int = 12, mi: int = 90):
     return barrier_jacobian(sparse.csr_array(j_eq), sparse.csr_array(j_in), slacks(rng, mi, ny - me - 4)), ny
 
 
-def paper_barrier_jacobian():
+def paper_barrier_jacobian(nodes: int = 8):
     """A paper-5kg candidate's constraint Jacobian, as trust-constr's canonical form has it:
     continuity rows as equalities, every two-sided row and variable bound twice (``+`` and ``-``)."""
     scenario = load_scenario(PAPER_5KG)
+    scenario = replace(scenario, optimizer=replace(scenario.optimizer, nodes=nodes))
     composition = Composition.from_name("B-J1-L3-J1-L2-J1-L3-J2-L2-E1", scenario.catalog)
     verdict = check_composition(composition, scenario.catalog, scenario.task)
     problem = composition_problem(
@@ -107,7 +109,7 @@ def test_paper_problem_projects_like_scipy(paper_case):
     kkt = BarrierKKT(A, ny)
     small = int(np.sum(kkt.s < SLACK_THRESHOLD))
     assert 0 < small < len(kkt.s)  # both kinds of row are exercised
-    assert kkt.dense_size == ny + (A.shape[0] - len(kkt.s)) + small
+    assert kkt.size == ny + (A.shape[0] - len(kkt.s)) + small
     assert_same_projections(A, ny)
 
 

@@ -16,28 +16,40 @@ slack rows give ``u = r_u - S l_in`` and ``J_ineq x - S^2 l_in = t_in - S r_u``.
 slack is large (``s >= threshold``) is eliminated, ``l_in = S^-2 (J_ineq x - t_in + S r_u)``,
 adding ``J_i^T J_i / s_i^2`` to the identity; a row whose slack is small keeps its multiplier, with
 ``-s_i^2`` on its diagonal, so no division by a vanishing slack enters the system (which is why
-the plain normal equations of ``A`` were ill-conditioned). What is left is a dense symmetric
-system of ``n_variables + n_eq + (small slacks)`` unknowns, 166-200 for that problem, factored by
-LAPACK. Each solve is refined against the full system (the reduced one can be worse conditioned
-than ``K``); the operators are SciPy's (``Z``, ``LS``, ``Y``), and ``tests/test_projections.py``
-checks them against SciPy's own and against a dense QR.
+the plain normal equations of ``A`` were ill-conditioned). What is left is a symmetric system
+of ``n_variables + n_eq + (small slacks)`` unknowns, 166-200 for that problem. Below
+:data:`BANDED_FROM` unknowns it is factored dense by LAPACK; above, where a dense LU's cube of
+the nodes dominated a solve (0.4 s of an iteration at 64 nodes), as a band with a border
+(:mod:`.banded`): each node's unknowns meet only their neighbours', the durations' columns aside,
+so the band's width does not grow with the nodes and the factorisation is linear in them. Each
+solve is refined against the full system (the reduced one can be worse conditioned than ``K``);
+the operators are SciPy's (``Z``, ``LS``, ``Y``), and ``tests/test_projections.py`` and
+``tests/test_projections_banded.py`` check them against SciPy's own, a dense QR and each other.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
+from collections.abc import Callable
 
 import numpy as np
 import scipy.linalg
 from scipy import sparse
 from scipy.sparse.linalg import LinearOperator
 
+from .banded import BorderedBandLU
 from .products import MatVec
 
 __all__ = ["SLACK_THRESHOLD", "BarrierKKT", "barrier_projections"]
 
 _getrf, _getrs = scipy.linalg.lapack.dgetrf, scipy.linalg.lapack.dgetrs
+
+#: Reduced systems of at least this many unknowns are factored as a band with a border: above
+#: it the band is faster, below it the dense LU (a factorisation takes 2.7-3.3 ms banded and
+#: 1.3-1.6 ms dense at 170 unknowns, 4.4-4.8 and 7.9-8.7 ms at 380; ``bench_nodes``' problems).
+BANDED_FROM = 256
 
 #: Slacks at or above this value are eliminated (their weight ``1 / s^2`` is at most 1e4); smaller
 #: ones keep their multiplier as an unknown of the dense system.
@@ -55,7 +67,11 @@ class BarrierKKT:
     n_variables
         Columns of ``A`` before the slacks'.
     threshold
-        Slacks below it keep their multiplier in the dense system.
+        Slacks below it keep their multiplier in the reduced system.
+    banded
+        Factor the reduced system as a band with a border (:mod:`.banded`) rather than dense;
+        by default when it has at least :data:`BANDED_FROM` unknowns. A band or border found
+        singular falls back to the dense LU.
 
     Raises
     ------
@@ -63,7 +79,7 @@ class BarrierKKT:
         If ``A`` does not have that structure, or the system is singular.
     """
 
-    def __init__(self, A, n_variables: int, threshold: float = SLACK_THRESHOLD):
+    def __init__(self, A, n_variables: int, threshold: float = SLACK_THRESHOLD, banded: bool | None = None):
         A = A if isinstance(A, sparse.csr_array) else sparse.csr_array(A)
         if not A.has_canonical_format:  # sorted, duplicates summed; the caller's matrix untouched
             A = A.copy()
@@ -88,35 +104,17 @@ class BarrierKKT:
         )
         self._a, self._a_t = MatVec(A), MatVec(A, transpose=True)
         self._s_small = s[small]
-        k = len(small)
-        size = ny + me + k
-        rank = np.full(mi, -1)
-        rank[small] = np.arange(k)
-        in_small = rank[layout.in_row]
-        kept = in_small >= 0
-        j_small = np.zeros((k, ny))
-        j_small.flat[in_small[kept] * ny + layout.in_indices[kept]] = j_in_data[kept]
-        j_eq = np.zeros((me, ny))
-        j_eq.flat[layout.eq_flat] = data[layout.eq_take]
-        dense = np.zeros((mi, ny))
-        dense.flat[layout.in_flat] = weighted_data
-        kkt = np.zeros((size, size))
-        kkt[:ny, :ny] = dense.T @ dense  # BLAS beats a sparse product here (0.27 vs 0.40 ms)
-        kkt[np.arange(ny), np.arange(ny)] += 1.0
-        kkt[:ny, ny : ny + me] = j_eq.T
-        kkt[ny : ny + me, :ny] = j_eq
-        kkt[:ny, ny + me :] = j_small.T
-        kkt[ny + me :, :ny] = j_small
-        kkt[np.arange(ny + me, size), np.arange(ny + me, size)] = -(self._s_small**2)
-        lu, piv, info = _getrf(kkt, overwrite_a=True)  # scipy.linalg.lu_factor's LAPACK call, without its checks
-        self._lu = (lu, piv)
-        if info != 0 or not np.all(np.diagonal(lu)):
-            raise ValueError("the augmented system is singular (dependent constraint rows)")
-
-    @property
-    def dense_size(self) -> int:
-        """Unknowns of the dense system."""
-        return self._lu[0].shape[0]
+        self.size = ny + me + len(small)
+        parts = (layout, data, j_in_data, weighted_data, small)
+        if banded is None:
+            banded = self.size >= BANDED_FROM
+        factor: Callable[[np.ndarray], np.ndarray] | None = None
+        if banded:
+            with contextlib.suppress(ValueError):  # a singular band or border: the dense LU decides
+                factor = BorderedBandLU(_reduced_sparse(self, *parts))
+        self._factor = factor if factor is not None else _dense_factor(self, *parts)
+        #: Whether the reduced system was factored as a band with a border.
+        self.banded = isinstance(self._factor, BorderedBandLU)
 
     def solve(self, r: np.ndarray, t: np.ndarray, max_refin: int = 3, rtol: float = 1e-12):
         """``(z, w)`` with ``z + A^T w = r`` and ``A z = t``, refined (at most ``max_refin``
@@ -144,11 +142,73 @@ class BarrierKKT:
         t_eq, t_in = t[:me], t[me:]
         g = t_in * inv_s - r_u * self._large  # S^-1 (t_in - S r_u) on eliminated rows
         rhs = np.concatenate([r_x + self._weighted_t(g), t_eq, t_in[small] - self._s_small * r_u[small]])
-        w, _ = _getrs(*self._lu, rhs)  # scipy.linalg.lu_solve's LAPACK call, without its checks
+        w = self._factor(rhs)
         x = w[:ny]
         l_in = (self._j_in(x) - t_in) * inv_s**2 + r_u * inv_s
         l_in[small] = w[ny + me :]
         return np.concatenate([x, r_u - self.s * l_in]), np.concatenate([w[ny : ny + me], l_in])
+
+
+def _dense_factor(kkt: BarrierKKT, layout, data, j_in_data, weighted_data, small):
+    """The reduced system as a dense array, LU-factored by LAPACK: its solve."""
+    ny, me, mi, k = kkt.ny, kkt.me, kkt.mi, len(small)
+    size = ny + me + k
+    rank = np.full(mi, -1)
+    rank[small] = np.arange(k)
+    in_small = rank[layout.in_row]
+    kept = in_small >= 0
+    j_small = np.zeros((k, ny))
+    j_small.flat[in_small[kept] * ny + layout.in_indices[kept]] = j_in_data[kept]
+    j_eq = np.zeros((me, ny))
+    j_eq.flat[layout.eq_flat] = data[layout.eq_take]
+    dense = np.zeros((mi, ny))
+    dense.flat[layout.in_flat] = weighted_data
+    kkt_matrix = np.zeros((size, size))
+    kkt_matrix[:ny, :ny] = dense.T @ dense  # BLAS beats a sparse product here (0.27 vs 0.40 ms)
+    kkt_matrix[np.arange(ny), np.arange(ny)] += 1.0
+    kkt_matrix[:ny, ny : ny + me] = j_eq.T
+    kkt_matrix[ny : ny + me, :ny] = j_eq
+    kkt_matrix[:ny, ny + me :] = j_small.T
+    kkt_matrix[ny + me :, :ny] = j_small
+    kkt_matrix[np.arange(ny + me, size), np.arange(ny + me, size)] = -(kkt._s_small**2)
+    lu, piv, info = _getrf(kkt_matrix, overwrite_a=True)  # scipy.linalg.lu_factor's LAPACK call, without its checks
+    if info != 0 or not np.all(np.diagonal(lu)):
+        raise ValueError("the augmented system is singular (dependent constraint rows)")
+
+    def solve(rhs: np.ndarray) -> np.ndarray:
+        return _getrs(lu, piv, rhs)[0]  # scipy.linalg.lu_solve's LAPACK call, without its checks
+
+    return solve
+
+
+def _reduced_sparse(kkt: BarrierKKT, layout, data, j_in_data, weighted_data, small) -> sparse.csr_array:
+    """The reduced system (the dense one of :func:`_dense_factor`) as a sparse matrix."""
+    ny, me, mi, k = kkt.ny, kkt.me, kkt.mi, len(small)
+    weighted = kkt._weighted_t.matrix
+    normal = (weighted.T @ weighted).tocoo()
+    eq_rows, eq_cols = np.divmod(layout.eq_flat, ny)
+    rank = np.full(mi, -1)
+    rank[small] = np.arange(k)
+    in_small = rank[layout.in_row]
+    kept = in_small >= 0
+    small_rows, small_cols = ny + me + in_small[kept], layout.in_indices[kept]
+    diagonal = np.arange(ny)
+    small_diagonal = np.arange(ny + me, ny + me + k)
+    rows = np.concatenate([normal.row, diagonal, ny + eq_rows, eq_cols, small_rows, small_cols, small_diagonal])
+    cols = np.concatenate([normal.col, diagonal, eq_cols, ny + eq_rows, small_cols, small_rows, small_diagonal])
+    values = np.concatenate(
+        [
+            normal.data,
+            np.ones(ny),
+            data[layout.eq_take],
+            data[layout.eq_take],
+            j_in_data[kept],
+            j_in_data[kept],
+            -(kkt._s_small**2),
+        ]
+    )
+    size = ny + me + k
+    return sparse.coo_array((values, (rows, cols)), shape=(size, size)).tocsr()  # duplicates summed
 
 
 def _norm(x: np.ndarray) -> float:
