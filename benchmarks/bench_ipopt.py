@@ -1,16 +1,18 @@
 """The peer, side by side: each OCP benchmark candidate (``bench_ocp``'s set on paper-5kg) solved
 from the same starting point by the project's trust-constr and by CasADi + IPOPT on the same
-nonlinear program (:mod:`benchmarks.casadi_peer`); per candidate the solve times, iterations,
-costs, their ratio, and whether each optimum passes the project's own dense verification. Beside
-them, trust-constr with the structured Hessian (``ShootingSolver(hessian="structured")``).
+nonlinear program (:mod:`benchmarks.casadi_peer`), with IPOPT's adaptive barrier strategy and
+with its default, monotone one; per candidate the solve times, iterations, costs, the ratios, each
+solver's final complementarity (one measure for all: :func:`~modular_robots.ocp.solver.complementarity`)
+and whether each optimum passes the project's own dense verification. Beside them, trust-constr
+with the structured Hessian (``ShootingSolver(hessian="structured")``).
 
 IPOPT's time is the solver's alone; its set-up (symbolics, derivative graphs) is reported apart.
-trust-constr's and IPOPT's solves are timed :data:`REPEATS` times each from the same start (the
-iterates are the same every time), in pairs (trust-constr then IPOPT, then IPOPT then
-trust-constr, and so on), and each candidate's ratio is the median of the pairs' ratios: a
-machine whose speed drifts by tens of per cent within a minute (seen on a shared 2-core machine)
-moves both solves of a pair alike.
-Each solver's time is its median (the structured Hessian's solve is timed once).
+The solves are timed in :data:`ROUNDS` rounds (the iterates are the same every time): each round
+takes every candidate once, the candidates' order and the three solvers' order rotated from one
+round to the next, so that a machine whose speed drifts by tens of per cent within a minute (seen
+on a shared 2-core machine) favours no candidate and no solver. A candidate's ratio is the median
+over the rounds of its trust-constr time over IPOPT's in the same round; each solver's time is its
+median (the structured Hessian's solve is timed once).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import json
 import statistics
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -31,8 +33,10 @@ from ._common import RESULTS, table, write
 from .bench_ocp import SCENARIO, benchmark_set
 from .casadi_peer import PeerSolver, solve_with_ipopt
 
-#: Timings per solver and candidate; the median is reported.
-REPEATS = 3
+#: Rounds of timing: every candidate and solver once a round, in rotated orders.
+ROUNDS = 5
+#: The solvers timed; ``ipopt`` has the adaptive barrier, ``ipopt_monotone`` IPOPT's default one.
+SOLVERS = ("trust_constr", "ipopt", "ipopt_monotone")
 
 
 def _verification(problem, y) -> dict:
@@ -48,60 +52,93 @@ def _verification(problem, y) -> dict:
     }
 
 
-def compare(scenario, verdict) -> dict:
-    """Both solvers on ``verdict``'s problem (the fastest boundary pair, the first sub-step count)."""
-    composition = verdict.composition
-    problem = composition_problem(
-        composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
-    )
-    peer_solver = PeerSolver(problem)
-    times, peer_times = [], []
+@dataclass
+class _Case:
+    """One candidate's problem, its peers set up once, and each solver's times and last answer."""
 
-    def ours_timed():
-        start = time.perf_counter()
-        solved = ShootingSolver(problem).solve()
-        times.append(time.perf_counter() - start)
-        return solved
+    verdict: object
+    problem: object
+    peers: dict
+    seconds: dict = field(default_factory=lambda: {name: [] for name in SOLVERS})
+    last: dict = field(default_factory=dict)
 
-    for k in range(REPEATS):
-        if k % 2:  # A B, then B A: a steady drift favours neither solver
-            peer = peer_solver.solve()
-            ours = ours_timed()
+    def solve(self, name: str) -> None:
+        if name == "trust_constr":
+            start = time.perf_counter()
+            outcome = ShootingSolver(self.problem).solve()
+            self.seconds[name].append(time.perf_counter() - start)
         else:
-            ours = ours_timed()
-            peer = peer_solver.solve()
-        peer_times.append(peer.solve_seconds)
-    ours_s, peer_s = float(np.median(times)), float(np.median(peer_times))
-    pair_ratios = [a / b for a, b in zip(times, peer_times)]
+            outcome = self.peers[name].solve()
+            self.seconds[name].append(outcome.solve_seconds)
+        self.last[name] = outcome
+
+
+def _case(scenario, verdict) -> _Case:
+    problem = composition_problem(
+        verdict.composition, scenario.catalog, scenario.task, verdict.q_start, verdict.q_goal, scenario.optimizer
+    )
+    return _Case(verdict, problem, {"ipopt": PeerSolver(problem), "ipopt_monotone": PeerSolver(problem, "monotone")})
+
+
+def _rotated(items, k: int) -> list:
+    k %= len(items)
+    return list(items[k:]) + list(items[:k])
+
+
+def timed_rounds(cases: list[_Case], rounds: int = ROUNDS) -> None:
+    """Every case with every solver once a round, orders rotated (the module docstring)."""
+    for r in range(rounds):
+        for case in _rotated(cases, r):
+            for name in _rotated(SOLVERS, r):
+                case.solve(name)
+
+
+def _row(case: _Case) -> dict:
+    problem, composition = case.problem, case.verdict.composition
+    ours, peer, monotone = (case.last[name] for name in SOLVERS)
+    seconds = {name: float(np.median(times)) for name, times in case.seconds.items()}
+    pair_ratios = [a / b for a, b in zip(case.seconds["trust_constr"], case.seconds["ipopt"], strict=True)]
+    monotone_ratios = [a / b for a, b in zip(case.seconds["trust_constr"], case.seconds["ipopt_monotone"], strict=True)]
     start = time.perf_counter()
     structured = ShootingSolver(problem, hessian="structured").solve()
     structured_s = time.perf_counter() - start
     ours_v = _verification(problem, ours.final.y) if ours.final is not None else {"passed": False}
     peer_v = _verification(problem, peer.y)
+    monotone_v = _verification(problem, monotone.y)
     return {
         "composition": composition.name,
         "dof": composition.dof,
         "variables": problem.n_variables,
         "constraints": problem.n_constraints,
-        "trust_constr_s": ours_s,
-        "ipopt_s": peer_s,
+        "trust_constr_s": seconds["trust_constr"],
+        "ipopt_s": seconds["ipopt"],
+        "ipopt_monotone_s": seconds["ipopt_monotone"],
         "ipopt_setup_s": peer.setup_seconds,
         "ratio": float(np.median(pair_ratios)),
         "ratio_spread": [min(pair_ratios), max(pair_ratios)],
-        "ratio_with_setup": ours_s / (peer_s + peer.setup_seconds),  # of the medians
+        "ratio_monotone": float(np.median(monotone_ratios)),
+        "ratio_with_setup": seconds["trust_constr"] / (seconds["ipopt"] + peer.setup_seconds),  # of the medians
         "trust_constr_iterations": ours.iterations,
         "ipopt_iterations": peer.iterations,
+        "ipopt_monotone_iterations": monotone.iterations,
         "trust_constr_status": ours.status,
         "ipopt_status": peer.status,
+        "ipopt_monotone_status": monotone.status,
+        "trust_constr_complementarity": ours.complementarity,
+        "ipopt_complementarity": peer.complementarity,
+        "ipopt_monotone_complementarity": monotone.complementarity,
         "trust_constr_tf_s": ours.final.tf if ours.final is not None else None,
         "ipopt_tf_s": peer.cost,
+        "ipopt_monotone_tf_s": monotone.cost,
         "structured_s": structured_s,
         "structured_iterations": structured.iterations,
         "structured_tf_s": structured.final.tf if structured.converged else None,
         "trust_constr_verified": ours_v["passed"],
         "ipopt_verified": peer_v["passed"],
+        "ipopt_monotone_verified": monotone_v["passed"],
         "trust_constr_verification": ours_v,
         "ipopt_verification": peer_v,
+        "ipopt_monotone_verification": monotone_v,
     }
 
 
@@ -140,13 +177,17 @@ def main() -> None:
     paper = load_scenario(SCENARIO)  # the paper's task: no self-collision, which the peer does not write
     scenario = replace(paper, task=replace(paper.task, self_collision=False))
     survivors, chosen = benchmark_set(scenario)
-    rows = [compare(scenario, verdict) for verdict in chosen]
+    cases = [_case(scenario, verdict) for verdict in chosen]
+    timed_rounds(cases)
+    rows = [_row(case) for case in cases]
     flat = [{k: v for k, v in r.items() if not isinstance(v, dict)} for r in rows]
     print(table(flat))
     summary = {
         "candidates": len(rows),
-        "repeats": REPEATS,
+        "rounds": ROUNDS,
         "median_ratio": statistics.median(r["ratio"] for r in rows),
+        "median_ratio_monotone": statistics.median(r["ratio_monotone"] for r in rows),
+        "median_ipopt_monotone_s": statistics.median(r["ipopt_monotone_s"] for r in rows),
         "median_ratio_with_setup": statistics.median(r["ratio_with_setup"] for r in rows),
         "median_trust_constr_s": statistics.median(r["trust_constr_s"] for r in rows),
         "median_ipopt_s": statistics.median(r["ipopt_s"] for r in rows),
@@ -158,6 +199,10 @@ def main() -> None:
         "trust_constr_iterations": sum(r["trust_constr_iterations"] for r in rows),
         "trust_constr_verified": sum(r["trust_constr_verified"] for r in rows),
         "ipopt_verified": sum(r["ipopt_verified"] for r in rows),
+        "ipopt_monotone_verified": sum(r["ipopt_monotone_verified"] for r in rows),
+        "median_complementarity": {
+            name: statistics.median(r[f"{name}_complementarity"] for r in rows) for name in SOLVERS
+        },
     }
     print(summary)
     unverified = unverified_by_trust_constr(scenario, survivors)

@@ -22,6 +22,7 @@ import numpy as np
 
 from modular_robots.obstacles import PlaneObstacle, SphereObstacle
 from modular_robots.ocp.shooting import ShootingProblem
+from modular_robots.ocp.solver import complementarity
 from modular_robots.robot import RobotModel
 
 __all__ = ["SymbolicRobot", "PeerNLP", "PeerSolution", "PeerSolver", "solve_with_ipopt"]
@@ -227,7 +228,8 @@ class PeerNLP:
 class PeerSolution:
     """IPOPT's answer: ``status`` (IPOPT's return status), ``iterations``, ``solve_seconds`` (the
     solver only), ``setup_seconds`` (symbolics, derivatives and code set-up), ``y`` the scaled
-    optimum and ``cost`` [s]."""
+    optimum, ``cost`` [s] and ``complementarity`` (:func:`~modular_robots.ocp.solver.complementarity`
+    of its rows and variables with IPOPT's multipliers)."""
 
     status: str
     success: bool
@@ -236,15 +238,17 @@ class PeerSolution:
     setup_seconds: float
     y: np.ndarray
     cost: float
+    complementarity: float = float("nan")
 
 
 class PeerSolver:
     """IPOPT on ``problem``'s NLP, set up once (exact Hessian, MUMPS, the problem's tolerances,
-    ``acceptable_iter = 0``: no early "acceptable" stop, and the adaptive barrier strategy);
-    :meth:`solve` may then be called and timed any number of times. ``setup_seconds`` is the
-    symbolics', derivatives' and IPOPT's set-up time."""
+    ``acceptable_iter = 0``: no early "acceptable" stop, and the barrier strategy ``mu_strategy``,
+    ``adaptive`` by default, or IPOPT's own default ``monotone``); :meth:`solve` may then be called
+    and timed any number of times. ``setup_seconds`` is the symbolics', derivatives' and IPOPT's
+    set-up time."""
 
-    def __init__(self, problem: ShootingProblem):
+    def __init__(self, problem: ShootingProblem, mu_strategy: str = "adaptive"):
         settings = problem.settings
         self.problem = problem
         nlp = PeerNLP.build(problem)
@@ -259,7 +263,7 @@ class PeerSolver:
                     "constr_viol_tol": settings.constraint_tolerance,
                     "acceptable_iter": 0,
                     "max_iter": settings.max_iterations,
-                    "mu_strategy": "adaptive",
+                    "mu_strategy": mu_strategy,
                     "linear_solver": "mumps",
                     "hessian_approximation": "exact",
                     "print_level": 0,
@@ -285,6 +289,15 @@ class PeerSolver:
         seconds = time.perf_counter() - start
         stats = self._solver.stats()
         y = np.array(out["x"]).ravel()
+        slackness = max(
+            complementarity(
+                np.array(out["g"]).ravel(),
+                np.array(out["lam_g"]).ravel(),
+                problem.constraint_lower,
+                problem.constraint_upper,
+            ),
+            complementarity(y, np.array(out["lam_x"]).ravel(), problem.variable_lower, problem.variable_upper),
+        )
         return PeerSolution(
             status=str(stats["return_status"]),
             success=bool(stats["success"]),
@@ -293,6 +306,7 @@ class PeerSolver:
             setup_seconds=self.setup_seconds,
             y=y,
             cost=float(y[0] * problem.variable_scale[0]),
+            complementarity=slackness,
         )
 
 

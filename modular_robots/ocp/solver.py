@@ -34,7 +34,7 @@ from ..exceptions import ProblemError, SolverReuseError
 from ._scipy import install, solver_thread
 from .shooting import ShootingProblem
 
-__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS", "ITERATION_LIMIT"]
+__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS", "ITERATION_LIMIT", "complementarity"]
 
 #: How the reason of a solve that stopped at its iteration limit begins.
 ITERATION_LIMIT = "iteration limit"
@@ -94,10 +94,26 @@ class SolverOutcome:
     seconds: float
     final: Iterate | None
     limit_reached: bool = False
+    #: The last iterate's :func:`complementarity` (NaN when the solver returned none).
+    complementarity: float = float("nan")
 
     @property
     def converged(self) -> bool:
         return self.status == "optimal"
+
+
+def complementarity(values, multipliers, lower, upper) -> float:
+    """The largest ``|multiplier| * gap`` over two-sided rows (or variables) whose ``values`` lie
+    between ``lower`` and ``upper``, ``gap`` the distance to the nearer bound (0 outside them):
+    zero at a KKT point, where a row off its bounds has no multiplier. Equality rows and rows
+    without bounds are left out. The solvers' own measures differ (trust-constr's stopping test
+    never looks at it; IPOPT's scales it), so a comparison of the two takes this one for both."""
+    values, multipliers = np.asarray(values, float), np.asarray(multipliers, float)
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    gap = np.minimum(values - lower, upper - values)
+    rows = (lower < upper) & np.isfinite(gap)
+    products = np.abs(multipliers[rows]) * np.maximum(gap[rows], 0.0)
+    return float(products.max(initial=0.0))
 
 
 class ShootingSolver:
@@ -339,7 +355,13 @@ class ShootingSolver:
                 cost_bound=self.problem.cost_bound,
             )
         iterations = final.iteration - self.iteration_offset if final is not None else 0
-        self._to_caller.put(SolverOutcome(status, reason, iterations, self._seconds, final, limit_reached))
+        slackness = float("nan")
+        if result is not None and getattr(result, "v", None) is not None:
+            slackness = max(
+                complementarity(c, v, lower, upper)
+                for c, v, (lower, upper) in zip(result.constr, result.v, self._row_bounds, strict=True)
+            )
+        self._to_caller.put(SolverOutcome(status, reason, iterations, self._seconds, final, limit_reached, slackness))
 
     def _minimize(self):
         problem = self.problem
@@ -356,11 +378,11 @@ class ShootingSolver:
         if exact and problem.has_exact_hessian and self.hessian == "structured":
             exact_rows = problem.rows_of("continuity", "path", "midpoint", "torque")
             clearance_rows = problem.rows_of(*problem.estimated_blocks)
-            constraints = [
+            parts = (
                 _rows_constraint(problem, exact_rows, lambda y, v: problem.exact_hessian(y, v, exact_rows)),
                 _rows_constraint(problem, clearance_rows, _SR1()),
-            ]
-            constraints = [c for c in constraints if c is not None]
+            )
+            constraints = [c for c in parts if c is not None]
         else:
             constraints = [
                 NonlinearConstraint(
@@ -371,6 +393,7 @@ class ShootingSolver:
                     hess=_SR1(),
                 )
             ]
+        self._row_bounds = [(c.lb, c.ub) for c in constraints] + [(problem.variable_lower, problem.variable_upper)]
         options = {
             "maxiter": self.max_iterations,
             "gtol": self.tolerance,
