@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["rpy_matrix", "segment_parameters", "pose_columns", "golden_minimum", "SEARCH_STEPS"]
+__all__ = ["rpy_matrix", "segment_parameters", "pose_columns", "golden_minimum", "one_capsule", "SEARCH_STEPS"]
 
 #: Golden-section steps of :func:`golden_minimum`: the bracket shrinks to 0.618^64 (about 1e-13).
 SEARCH_STEPS = 64
@@ -84,3 +84,18 @@ def golden_minimum(f: Callable[[np.ndarray], np.ndarray], shape: tuple[int, ...]
     ends = [np.zeros(shape), np.ones(shape)]
     best = np.argmin(np.stack([f(t), *(f(e) for e in ends)]), axis=0)
     return np.choose(best, [t, *ends])
+
+
+def one_capsule(
+    many: Callable[..., tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    mid: np.ndarray,
+    axis: np.ndarray,
+    length: float,
+    radius: float,
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray | None]:
+    """A shape's ``signed_distance`` of one capsule from its ``signed_distances`` (``many``): the
+    distance, the witness points, and the gradient (None where ``many`` gives NaN)."""
+    d, on_robot, on_shape, gradient = many(
+        np.asarray(mid, dtype=float)[None], np.asarray(axis, dtype=float)[None], np.array([length]), np.array([radius])
+    )
+    return float(d[0]), on_robot[0], on_shape[0], None if np.isnan(gradient[0]).any() else gradient[0]

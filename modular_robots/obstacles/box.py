@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._geometry import SEARCH_STEPS, golden_minimum, pose_columns, rpy_matrix
+from ._geometry import SEARCH_STEPS, golden_minimum, one_capsule, pose_columns, rpy_matrix
 from ._json import json_vector
 from .base import Obstacle, Witness, members
 
@@ -104,20 +104,30 @@ class BoxObstacle:
         return distance, distance
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
+        return one_capsule(self.signed_distances, mid, axis, length, radius)
+
+    def signed_distances(
+        self, mid: np.ndarray, axis: np.ndarray, length: np.ndarray, radius: np.ndarray, deep: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Signed distances ``(N,)`` of ``N`` capsules (``mid``, ``axis`` ``(N, 3)``, ``length``,
+        ``radius`` ``(N,)``): the box's smallest signed distance along each capsule's axis (the
+        module docstring), less its radius; witness points on the robot and on the box and
+        gradients (:func:`_gradient`) ``(N, 3)``. ``deep`` changes nothing: every distance is exact."""
         rotation, center = rpy_matrix(self.rpy), np.asarray(self.center)
         half = 0.5 * np.asarray(self.size)
-        start = np.asarray(mid, dtype=float) - 0.5 * length * np.asarray(axis, dtype=float)
-        local_start = rotation.T @ (start - center)
-        local_direction = rotation.T @ (length * np.asarray(axis, dtype=float))
-        t = float(_minimising_parameter(local_start, local_direction, half))
-        point = local_start + t * local_direction
-        distance = float(_signed_distance(point, half))
+        mid, axis = np.asarray(mid, dtype=float).reshape(-1, 3), np.asarray(axis, dtype=float).reshape(-1, 3)
+        length, radius = np.asarray(length, dtype=float), np.asarray(radius, dtype=float)
+        local_start = (mid - 0.5 * length[:, None] * axis - center) @ rotation  # rotation^T v, row by row
+        local_direction = (length[:, None] * axis) @ rotation
+        t = _minimising_parameter(local_start, local_direction, half)
+        point = local_start + t[:, None] * local_direction
+        distance = _signed_distance(point, half)
         surface, normal = _surface_and_normal(point, half)
         gradient = _gradient(point, half, local_direction, normal, distance)
-        size = float(np.linalg.norm(gradient))
-        across = gradient / size if size > 0.0 else normal  # the robot's witness: across the gradient
-        to_base = lambda v: center + rotation @ v  # noqa: E731
-        return distance - radius, to_base(point - radius * across), to_base(surface), rotation @ gradient
+        size = np.linalg.norm(gradient, axis=1, keepdims=True)
+        across = np.divide(gradient, size, out=normal.copy(), where=size > 0.0)  # the robot's witness: across it
+        on_robot = center + (point - radius[:, None] * across) @ rotation.T
+        return distance - radius, on_robot, center + surface @ rotation.T, gradient @ rotation.T
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
@@ -153,38 +163,45 @@ def _minimising_parameter(start: np.ndarray, direction: np.ndarray, half: np.nda
     return golden_minimum(lambda t: _signed_distance(start + t[..., None] * direction, half), shape)
 
 
-def _gradient(point: np.ndarray, half: np.ndarray, direction: np.ndarray, normal: np.ndarray, distance: float):
-    """The gradient of the axis's smallest signed distance with respect to a translation of the
-    axis, at its deepest point ``point`` (box frame). Outside, the unit ``normal``. Inside, the
-    signed distance is the largest of the six faces' ``n_i . p - h_i``, and along the axis it is
-    usually smallest where two of them cross (two adjacent faces, or a face and its opposite at
-    the mid-plane): there the gradient is the combination ``l_a n_a + l_b n_b`` with
-    ``l_a + l_b = 1`` and ``l_a n_a . d + l_b n_b . d = 0`` (``d`` the axis) that keeps them
-    crossing; the nearest face's normal where one face is nearest or the axis ends there."""
-    if distance > 0.0:
-        return normal
+def _gradient(
+    point: np.ndarray, half: np.ndarray, direction: np.ndarray, normal: np.ndarray, distance: np.ndarray
+) -> np.ndarray:
+    """The gradients ``(N, 3)`` of the axes' smallest signed distances with respect to a
+    translation of each axis, at their deepest points ``point`` ``(N, 3)`` (box frame). Outside,
+    the unit ``normal``. Inside, the signed distance is the largest of the six faces'
+    ``n_i . p - h_i``, and along the axis it is usually smallest where two of them cross (two
+    adjacent faces, or a face and its opposite at the mid-plane): there the gradient is the
+    combination ``l_a n_a + l_b n_b`` with ``l_a + l_b = 1`` and ``l_a n_a . d + l_b n_b . d = 0``
+    (``d`` the axis) that keeps them crossing; the nearest face's normal where one face is
+    nearest or the axis ends there."""
     faces = np.vstack([np.eye(3), -np.eye(3)])
-    values = faces @ point - np.concatenate([half, half])
-    a, b = (int(i) for i in np.argsort(values)[::-1][:2])
-    if values[a] - values[b] > 1e-9 * max(1.0, float(half.max())):
-        return normal
-    slope_a, slope_b = float(faces[a] @ direction), float(faces[b] @ direction)
-    if slope_a * slope_b >= 0.0:  # they do not cross inside the axis: the axis ends there
-        return normal
-    weight = slope_b / (slope_b - slope_a)
-    return weight * faces[a] + (1.0 - weight) * faces[b]
+    values = point @ faces.T - np.concatenate([half, half])  # (N, 6)
+    order = np.argsort(values, axis=1)[:, ::-1]
+    rows = np.arange(len(point))
+    a, b = order[:, 0], order[:, 1]
+    slope_a = np.einsum("nc,nc->n", faces[a], direction)
+    slope_b = np.einsum("nc,nc->n", faces[b], direction)
+    kink = (
+        (distance <= 0.0)
+        & (values[rows, a] - values[rows, b] <= 1e-9 * max(1.0, float(half.max())))
+        & (slope_a * slope_b < 0.0)  # they cross inside the axis (else the axis ends there)
+    )
+    weight = np.divide(slope_b, slope_b - slope_a, out=np.zeros_like(slope_a), where=kink)[:, None]
+    return np.where(kink[:, None], weight * faces[a] + (1.0 - weight) * faces[b], normal)
 
 
 def _surface_and_normal(local: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The nearest point of the box's surface to the point ``local`` (box frame) and the unit
-    direction in which the signed distance grows there."""
-    if np.any(np.abs(local) > half):  # outside: clamp
-        surface = np.clip(local, -half, half)
-        gap = local - surface
-        return surface, gap / np.linalg.norm(gap)
-    axis = int(np.argmax(np.abs(local) - half))  # inside: the nearest face
-    normal = np.zeros(3)
-    normal[axis] = 1.0 if local[axis] >= 0.0 else -1.0
-    surface = local.copy()
-    surface[axis] = normal[axis] * half[axis]
-    return surface, normal
+    """The nearest points of the box's surface to the points ``local`` ``(N, 3)`` (box frame) and
+    the unit directions in which the signed distance grows there."""
+    outside = np.any(np.abs(local) > half, axis=1)
+    clamped = np.clip(local, -half, half)
+    gap = local - clamped
+    gap_size = np.linalg.norm(gap, axis=1, keepdims=True)
+    face = np.argmax(np.abs(local) - half, axis=1)  # inside: the nearest face
+    rows = np.arange(len(local))
+    face_normal = np.zeros_like(local)
+    face_normal[rows, face] = np.where(local[rows, face] >= 0.0, 1.0, -1.0)
+    on_face = local.copy()
+    on_face[rows, face] = face_normal[rows, face] * half[face]
+    away = np.divide(gap, gap_size, out=face_normal.copy(), where=gap_size > 0.0)
+    return np.where(outside[:, None], clamped, on_face), np.where(outside[:, None], away, face_normal)

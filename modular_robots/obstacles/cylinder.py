@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._geometry import golden_minimum, pose_columns, rpy_matrix
+from ._geometry import golden_minimum, one_capsule, pose_columns, rpy_matrix
 from ._json import json_number, json_vector
 from .base import Obstacle, Witness, members
 
@@ -113,20 +113,30 @@ class CylinderObstacle:
         return distance, distance
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
+        return one_capsule(self.signed_distances, mid, axis, length, radius)
+
+    def signed_distances(
+        self, mid: np.ndarray, axis: np.ndarray, length: np.ndarray, radius: np.ndarray, deep: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Signed distances ``(N,)`` of ``N`` capsules (``mid``, ``axis`` ``(N, 3)``, ``length``,
+        ``radius`` ``(N,)``): the cylinder's smallest signed distance along each capsule's axis,
+        less its radius; witness points on the robot and on the cylinder and gradients
+        (:func:`_gradient`) ``(N, 3)``. ``deep`` changes nothing: every distance is exact."""
         rotation, center = rpy_matrix(self.rpy), np.asarray(self.center)
         dimensions = np.array([self.radius, 0.5 * self.length])
-        axis = np.asarray(axis, dtype=float)
-        local_start = rotation.T @ (np.asarray(mid, dtype=float) - 0.5 * length * axis - center)
-        local_direction = rotation.T @ (length * axis)
-        along = lambda t: _signed_distance(local_start + np.asarray(t)[..., None] * local_direction, dimensions)  # noqa: E731
-        point = local_start + float(golden_minimum(along, ())) * local_direction
-        distance = float(_signed_distance(point, dimensions))
+        mid, axis = np.asarray(mid, dtype=float).reshape(-1, 3), np.asarray(axis, dtype=float).reshape(-1, 3)
+        length, radius = np.asarray(length, dtype=float), np.asarray(radius, dtype=float)
+        local_start = (mid - 0.5 * length[:, None] * axis - center) @ rotation  # rotation^T v, row by row
+        local_direction = (length[:, None] * axis) @ rotation
+        along = lambda t: _signed_distance(local_start + t[..., None] * local_direction, dimensions)  # noqa: E731
+        point = local_start + golden_minimum(along, (len(mid),))[:, None] * local_direction
+        distance = _signed_distance(point, dimensions)
         surface, normal = _surface_and_normal(point, dimensions, local_direction)
         gradient = _gradient(point, dimensions, local_direction, normal, distance)
-        size = float(np.linalg.norm(gradient))
-        across = gradient / size if size > 0.0 else normal  # the robot's witness: across the gradient
-        to_base = lambda v: center + rotation @ v  # noqa: E731
-        return distance - radius, to_base(point - radius * across), to_base(surface), rotation @ gradient
+        size = np.linalg.norm(gradient, axis=1, keepdims=True)
+        across = np.divide(gradient, size, out=normal.copy(), where=size > 0.0)  # the robot's witness: across it
+        on_robot = center + (point - radius[:, None] * across) @ rotation.T
+        return distance - radius, on_robot, center + surface @ rotation.T, gradient @ rotation.T
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
@@ -161,50 +171,66 @@ def _signed_distance(local: np.ndarray, size: np.ndarray) -> np.ndarray:
 
 
 def _radial(point: np.ndarray, direction: np.ndarray) -> np.ndarray:
-    """The unit direction away from the cylinder's axis at ``point`` (cylinder frame); on the
-    axis, one across the axis and ``direction`` (a subgradient of the distance from the axis)."""
-    rho = math.hypot(point[0], point[1])
-    if rho > 1e-12:
-        return np.array([point[0] / rho, point[1] / rho, 0.0])
+    """The unit directions ``(N, 3)`` away from the cylinder's axis at ``point`` ``(N, 3)``
+    (cylinder frame); on the axis, one across the axis and ``direction`` (a subgradient of the
+    distance from the axis)."""
+    rho = np.hypot(point[:, 0], point[:, 1])[:, None]
+    flat = np.column_stack([point[:, 0], point[:, 1], np.zeros(len(point))])
     across = np.cross([0.0, 0.0, 1.0], direction)
-    size = float(np.linalg.norm(across))
-    return across / size if size > 1e-12 else np.array([1.0, 0.0, 0.0])
+    across_size = np.linalg.norm(across, axis=1, keepdims=True)
+    on_axis = np.divide(across, across_size, out=np.tile([1.0, 0.0, 0.0], (len(point), 1)), where=across_size > 1e-12)
+    return np.divide(flat, rho, out=on_axis, where=rho > 1e-12)
 
 
 def _surface_and_normal(point: np.ndarray, size: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The nearest point of the cylinder's surface to ``point`` (cylinder frame) and the unit
-    direction in which the signed distance grows there."""
+    """The nearest points of the cylinder's surface to the points ``point`` ``(N, 3)`` (cylinder
+    frame) and the unit directions in which the signed distance grows there."""
     radius, half = size
     radial = _radial(point, direction)
-    rho, z = math.hypot(point[0], point[1]), float(point[2])
-    if rho > radius or abs(z) > half:  # outside: clamp radially and along the axis
-        surface = min(rho, radius) * radial + np.array([0.0, 0.0, float(np.clip(z, -half, half))])
-        gap = point - surface
-        return surface, gap / np.linalg.norm(gap)
-    if rho - radius >= abs(z) - half:  # inside, nearest the side
-        return radius * radial + np.array([0.0, 0.0, z]), radial
-    end = 1.0 if z >= 0.0 else -1.0
-    return np.array([point[0], point[1], end * half]), np.array([0.0, 0.0, end])
+    rho, z = np.hypot(point[:, 0], point[:, 1]), point[:, 2]
+    outside = (rho > radius) | (np.abs(z) > half)
+    clamped = np.minimum(rho, radius)[:, None] * radial
+    clamped[:, 2] = np.clip(z, -half, half)  # clamped radially and along the axis
+    gap = point - clamped
+    gap_size = np.linalg.norm(gap, axis=1, keepdims=True)
+    away = np.divide(gap, gap_size, out=radial.copy(), where=gap_size > 0.0)
+    nearest_side = (rho - radius >= np.abs(z) - half)[:, None]  # inside: the side, else an end
+    end = np.where(z >= 0.0, 1.0, -1.0)
+    on_side = radius * radial
+    on_side[:, 2] = z
+    on_end = point.copy()
+    on_end[:, 2] = end * half
+    end_normal = np.zeros_like(point)
+    end_normal[:, 2] = end
+    surface = np.where(outside[:, None], clamped, np.where(nearest_side, on_side, on_end))
+    normal = np.where(outside[:, None], away, np.where(nearest_side, radial, end_normal))
+    return surface, normal
 
 
-def _gradient(point: np.ndarray, size: np.ndarray, direction: np.ndarray, normal: np.ndarray, distance: float):
-    """The gradient of the axis's smallest signed distance with respect to a translation of the
-    axis, at its deepest point ``point`` (cylinder frame). Outside, the unit ``normal``. Inside,
-    the signed distance is the largest of ``rho - R`` (the side) and ``+-z - h`` (the ends), and
-    along the axis it is usually smallest where two of them cross: there the gradient is the
-    combination ``l_a n_a + l_b n_b`` with ``l_a + l_b = 1`` and ``l_a n_a . d + l_b n_b . d = 0``
-    (``d`` the axis) that keeps them crossing, as for the box."""
-    if distance > 0.0:
-        return normal
+def _gradient(
+    point: np.ndarray, size: np.ndarray, direction: np.ndarray, normal: np.ndarray, distance: np.ndarray
+) -> np.ndarray:
+    """The gradients ``(N, 3)`` of the axes' smallest signed distances with respect to a
+    translation of each axis, at their deepest points ``point`` ``(N, 3)`` (cylinder frame).
+    Outside, the unit ``normal``. Inside, the signed distance is the largest of ``rho - R`` (the
+    side) and ``+-z - h`` (the ends), and along the axis it is usually smallest where two of them
+    cross: there the gradient is the combination ``l_a n_a + l_b n_b`` with ``l_a + l_b = 1`` and
+    ``l_a n_a . d + l_b n_b . d = 0`` (``d`` the axis) that keeps them crossing, as for the box."""
     radius, half = size
-    rho, z = math.hypot(point[0], point[1]), float(point[2])
-    faces = np.array([_radial(point, direction), [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
-    values = np.array([rho - radius, z - half, -z - half])
-    a, b = (int(i) for i in np.argsort(values)[::-1][:2])
-    if values[a] - values[b] > 1e-9 * max(1.0, radius, half):
-        return normal
-    slope_a, slope_b = float(faces[a] @ direction), float(faces[b] @ direction)
-    if slope_a * slope_b >= 0.0:  # they do not cross inside the axis: the axis ends there
-        return normal
-    weight = slope_b / (slope_b - slope_a)
-    return weight * faces[a] + (1.0 - weight) * faces[b]
+    rho, z = np.hypot(point[:, 0], point[:, 1]), point[:, 2]
+    up = np.tile([0.0, 0.0, 1.0], (len(point), 1))
+    faces = np.stack([_radial(point, direction), up, -up], axis=1)  # (N, 3 faces, 3)
+    values = np.column_stack([rho - radius, z - half, -z - half])
+    order = np.argsort(values, axis=1)[:, ::-1]
+    rows = np.arange(len(point))
+    a, b = order[:, 0], order[:, 1]
+    face_a, face_b = faces[rows, a], faces[rows, b]
+    slope_a = np.einsum("nc,nc->n", face_a, direction)
+    slope_b = np.einsum("nc,nc->n", face_b, direction)
+    kink = (
+        (distance <= 0.0)
+        & (values[rows, a] - values[rows, b] <= 1e-9 * max(1.0, radius, half))
+        & (slope_a * slope_b < 0.0)  # they cross inside the axis (else the axis ends there)
+    )
+    weight = np.divide(slope_b, slope_b - slope_a, out=np.zeros_like(slope_a), where=kink)[:, None]
+    return np.where(kink[:, None], weight * face_a + (1.0 - weight) * face_b, normal)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from ._geometry import one_capsule
 from ._json import json_vector
 from .base import Obstacle, Witness, members
 
@@ -99,12 +100,30 @@ class PlaneObstacle:
         return distance, distance
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
+        return one_capsule(self.signed_distances, mid, axis, length, radius)
+
+    def signed_distances(
+        self, mid: np.ndarray, axis: np.ndarray, length: np.ndarray, radius: np.ndarray, deep: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Signed distances ``(N,)`` of ``N`` capsules (``mid``, ``axis`` ``(N, 3)``, ``length``,
+        ``radius`` ``(N,)``): the height of each capsule's lower axis end above the plane, less its
+        radius; witness points ``(N, 3)`` that end moved down by the radius and its foot on the
+        plane; gradients the normal. ``deep`` changes nothing: every distance is exact."""
         n = np.asarray(self.normal)
-        ends = np.asarray(mid, dtype=float) + np.outer([-0.5 * length, 0.5 * length], axis)
+        mid, axis = np.asarray(mid, dtype=float).reshape(-1, 3), np.asarray(axis, dtype=float).reshape(-1, 3)
+        length, radius = np.asarray(length, dtype=float), np.asarray(radius, dtype=float)
+        spread = 0.5 * length[:, None] * axis
+        ends = np.stack([mid - spread, mid + spread])  # (2, N, 3), the lower end first on a tie
         heights = ends @ n - self.offset
-        low = int(np.argmin(heights))
-        end, height = ends[low], float(heights[low])
-        return height - radius, end - radius * n, end - height * n, n
+        low = np.argmin(heights, axis=0)
+        rows = np.arange(len(mid))
+        end, height = ends[low, rows], heights[low, rows]
+        return (
+            height - radius,
+            end - radius[:, None] * n,
+            end - height[:, None] * n,
+            np.broadcast_to(n, end.shape).copy(),
+        )
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:

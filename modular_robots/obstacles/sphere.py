@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from ._geometry import one_capsule
 from ._json import json_number, json_vector
 from .base import Obstacle, Witness, members
 
@@ -30,7 +31,7 @@ class SphereObstacle:
     center: tuple[float, float, float]
     radius: float
     kind: ClassVar[str] = "sphere"
-    closed_form: ClassVar[bool] = False  # FCL's sphere distances are exact: its results are kept
+    closed_form: ClassVar[bool] = True  # capsule_sphere, all of a query's pairs at once
     moving_only: ClassVar[bool] = False
 
     def __post_init__(self) -> None:  # any sequence of three numbers in, a hashable value out
@@ -99,10 +100,14 @@ class SphereObstacle:
         return gap, gap
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness:
-        d, on_robot, on_obstacle = capsule_sphere(
-            mid, axis, length, radius, np.asarray(self.center, dtype=float), self.radius
-        )
-        return d, on_robot, on_obstacle, None  # normals() from the witness points, as for FCL's
+        return one_capsule(self.signed_distances, mid, axis, length, radius)
+
+    def signed_distances(
+        self, mid: np.ndarray, axis: np.ndarray, length: np.ndarray, radius: np.ndarray, deep: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`capsule_sphere` of ``N`` capsules (``mid``, ``axis`` ``(N, 3)``, ``length``,
+        ``radius`` ``(N,)``) and this sphere. ``deep`` changes nothing: every distance is exact."""
+        return capsule_sphere(mid, axis, length, radius, np.asarray(self.center, dtype=float), self.radius)
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:
@@ -117,22 +122,35 @@ class SphereObstacle:
 
 
 def capsule_sphere(
-    mid: np.ndarray, axis: np.ndarray, length: float, radius: float, center: np.ndarray, obstacle_radius: float
-) -> tuple[float, np.ndarray, np.ndarray]:
-    """Signed distance [m] and witness points (on the capsule, on the sphere) of a capsule (axis
-    midpoint ``mid``, unit ``axis``, ``length``, ``radius``; a sphere when ``length`` is 0) and a
-    sphere: the distance from the sphere's centre to the capsule's axis segment, less both radii.
+    mid: np.ndarray,
+    axis: np.ndarray,
+    length: np.ndarray,
+    radius: np.ndarray,
+    center: np.ndarray,
+    obstacle_radius: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Signed distances [m] ``(N,)``, witness points on the capsules and on the sphere ``(N, 3)``
+    and NaN gradients ``(N, 3)`` (:meth:`SphereObstacle.normals` gives them) of ``N`` capsules
+    (axis midpoints ``mid`` and unit ``axis`` ``(N, 3)``, ``length`` and ``radius`` ``(N,)``; a
+    sphere where ``length`` is 0) and one sphere: the distance from the sphere's centre to each
+    capsule's axis segment, less both radii.
 
-    Used for overlapping pairs, in closed form because both shapes are swept spheres: FCL's
-    signed-distance query (EPA) can abort the whole process near contact with a C++
-    ``std::logic_error`` that Python cannot catch (FCL issues #390, #445, #493; reproduced with
-    python-fcl 0.7 on a 0.1 m port sphere 4.5 mm inside a 0.35 m obstacle), and it does not
-    return for nearly concentric spheres.
+    In closed form because both shapes are swept spheres. FCL's plain distance is the same while
+    they are apart (to 4e-16 m), but its signed-distance query (EPA) can abort the whole process
+    near contact with a C++ ``std::logic_error`` that Python cannot catch (FCL issues #390, #445,
+    #493; reproduced with python-fcl 0.7 on a 0.1 m port sphere 4.5 mm inside a 0.35 m
+    obstacle), and it does not return for nearly concentric spheres.
     """
-    mid, axis, center = (np.asarray(v, dtype=float) for v in (mid, axis, center))
-    along = float(np.clip((center - mid) @ axis, -0.5 * length, 0.5 * length))
-    core = mid + along * axis
+    mid, axis = np.asarray(mid, dtype=float).reshape(-1, 3), np.asarray(axis, dtype=float).reshape(-1, 3)
+    length, radius = np.asarray(length, dtype=float), np.asarray(radius, dtype=float)
+    half = 0.5 * length
+    along = np.clip(np.einsum("nc,nc->n", center - mid, axis), -half, half)
+    core = mid + along[:, None] * axis
     offset = center - core
-    apart = float(np.linalg.norm(offset))
-    toward = offset / apart if apart > 0.0 else np.array([0.0, 0.0, 1.0])  # any direction on the axis
-    return apart - radius - obstacle_radius, core + radius * toward, center - obstacle_radius * toward
+    apart = np.sqrt(np.einsum("nc,nc->n", offset, offset))
+    toward = np.empty_like(offset)
+    toward[:] = (0.0, 0.0, 1.0)  # any direction on the axis
+    np.divide(offset, apart[:, None], out=toward, where=apart[:, None] > 0.0)
+    on_robot = core + radius[:, None] * toward
+    on_sphere = center - obstacle_radius * toward
+    return apart - radius - obstacle_radius, on_robot, on_sphere, np.full_like(offset, np.nan)
