@@ -160,21 +160,36 @@ class CollisionModel:
 
     def distances(self, q: np.ndarray) -> Distances:
         """Signed distance of every (primitive, obstacle) pair at configuration ``q``."""
-        rot, mid, _ = self._placements(np.asarray(q, dtype=float)[None], jacobians=False)
-        rot, mid = rot[0], mid[0]
-        for i, obj in enumerate(self._robot_objects):
-            _place(obj, rot[i], mid[i])
-        shape = (len(self._robot_objects), len(self._obstacle_objects))
-        dist = np.empty(shape)
-        on_robot = np.empty(shape + (3,))
-        on_obstacle = np.empty(shape + (3,))
-        for i in range(len(self._robot_objects)):
-            for j in range(len(self._obstacle_objects)):
-                if self._applies is not None and not self._applies[i, j]:
-                    dist[i, j], on_robot[i, j], on_obstacle[i, j] = np.inf, np.nan, np.nan
-                    continue
-                dist[i, j], on_robot[i, j], on_obstacle[i, j], _ = self._pair_distance(i, j, mid[i], rot[i])
-        return Distances(dist, on_robot, on_obstacle)
+        dist, on_robot, on_obstacle = self.distances_many(np.asarray(q, dtype=float)[None])
+        return Distances(dist[0], on_robot[0], on_obstacle[0])
+
+    def distances_many(self, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`distances` at every row of ``qs`` ``(K, nv)``: signed distances ``(K, P, O)``
+        [m] and witness points on the robot and on the obstacle ``(K, P, O, 3)``; a pair that is
+        not measured (:meth:`_moved_toward`) is ``inf`` apart, its witnesses NaN. A shape with
+        ``signed_distances`` measures all its pairs in one call."""
+        qs = np.asarray(qs, dtype=float).reshape(-1, self.robot.nv)
+        rot, mid, _ = self._placements(qs, jacobians=False)
+        shape = (len(qs), len(self._robot_objects), len(self._obstacle_objects))
+        dist = np.full(shape, np.inf)
+        on_robot = np.full(shape + (3,), np.nan)
+        on_obstacle = np.full(shape + (3,), np.nan)
+        measure = np.ones(shape, dtype=bool)
+        if self._applies is not None:
+            measure &= self._applies
+        for j, many in self._batched:
+            ks, iis = np.nonzero(measure[:, :, j])
+            measure[:, :, j] = False
+            if ks.size:
+                d, pr, po, _ = many(*self._capsules(mid[ks, iis], rot[ks, iis], iis))
+                dist[ks, iis, j], on_robot[ks, iis, j], on_obstacle[ks, iis, j] = d, pr, po
+        placed = None
+        for k, i, j in zip(*(index.tolist() for index in np.nonzero(measure)), strict=True):
+            if placed != (k, i):
+                _place(self._robot_objects[i], rot[k, i], mid[k, i])
+                placed = (k, i)
+            dist[k, i, j], on_robot[k, i, j], on_obstacle[k, i, j], _ = self._pair_distance(i, j, mid[k, i], rot[k, i])
+        return dist, on_robot, on_obstacle
 
     def _pair_distance(self, i: int, j: int, mid: np.ndarray, rot: np.ndarray) -> Witness:
         """Signed distance and witness points of primitive ``i``, placed (its FCL object) with its
@@ -435,16 +450,10 @@ def closest_approach(collision: CollisionModel, times: np.ndarray, qs: np.ndarra
     obstacles of ``collision`` (the index is in the list it was given; None: none in reach)."""
     if not collision.obstacles:
         return None
-    best: tuple[float, float, int, int] | None = None
-    for t, q in zip(times, qs):
-        d = collision.distances(q).distance
-        pair = np.unravel_index(int(np.argmin(d)), d.shape)
-        if best is None or d[pair] < best[0]:
-            best = (float(d[pair]), float(t), int(pair[0]), int(pair[1]))
-    assert best is not None  # times is not empty
-    clearance, t, i, j = best
+    dist = collision.distances_many(qs)[0]
+    k, i, j = (int(n) for n in np.unravel_index(int(np.argmin(dist)), dist.shape))  # the first smallest
     name = collision.robot.primitives[collision.primitive_indices[i]].name
-    return Approach(clearance, t, name, collision.given_index[j])
+    return Approach(float(dist[k, i, j]), float(times[k]), name, collision.given_index[j])
 
 
 def reach_bound(robot: RobotModel) -> float:

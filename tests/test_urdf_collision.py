@@ -394,3 +394,35 @@ def test_placing_by_rotation_and_translation_is_fcls_own_transform():
                 found.append((fcl.distance(obj, obstacle, _NEAREST_POINTS, result), *result.nearest_points))
             assert np.float64(found[0][0]).tobytes() == np.float64(found[1][0]).tobytes()
             assert all(a.tobytes() == b.tobytes() for a, b in zip(found[0][1:], found[1][1:], strict=True))
+
+
+def test_many_configurations_at_once_measure_as_one_at_a_time(paper_catalog):
+    """``distances_many`` (every shape's pairs of all configurations in one call each) gives what
+    each configuration's own pairs give, obstacle by obstacle from its own closed form; and the
+    closest approach of a motion is the first instant and pair of the smallest of those."""
+    from modular_robots.collision import closest_approach
+    from modular_robots.obstacles import BoxObstacle, CylinderObstacle, PlaneObstacle
+
+    obstacles = [
+        SphereObstacle((0.3, 0.0, 0.6), 0.25),
+        BoxObstacle((0.0, 0.3, 0.5), (0.3, 0.2, 0.5), (0.2, 0.0, 0.4)),
+        CylinderObstacle((-0.3, 0.0, 0.6), 0.1, 0.8, (0.5, 0.0, 0.0)),
+        PlaneObstacle((0.0, 0.0, -0.1), (0.0, 0.0, 1.0)),
+    ]
+    robot = robot_model(Composition.from_name("B-J1-L2-J1-L1-J2-L3-E1", paper_catalog), paper_catalog, 5.0)
+    model = CollisionModel(robot, obstacles)
+    qs = np.random.default_rng(5).uniform(robot.lower, robot.upper, (9, robot.nv))
+    dist, on_robot, on_obstacle = model.distances_many(qs)
+    assert np.isfinite(dist).all() and (dist < 0).any() and (dist > 0).any()
+    rot, mid, _ = model._placements(qs, jacobians=False)
+    for k in range(len(qs)):
+        for i in range(dist.shape[1]):
+            for j, obstacle in enumerate(obstacles):
+                one = obstacle.signed_distance(mid[k, i], rot[k, i][:, 2], model._prim_lengths[i], model._prim_radii[i])
+                assert dist[k, i, j] == pytest.approx(one[0], abs=1e-12)
+                np.testing.assert_allclose(on_robot[k, i, j], one[1], atol=1e-12)
+                np.testing.assert_allclose(on_obstacle[k, i, j], one[2], atol=1e-12)
+    times = np.linspace(0.0, 1.0, len(qs))
+    approach = closest_approach(model, times, qs)
+    k = int(np.argmin(dist.min(axis=(1, 2))))
+    assert approach is not None and approach.clearance == dist.min() and approach.t == times[k]
