@@ -52,7 +52,7 @@ _getrf, _getrs = scipy.linalg.lapack.dgetrf, scipy.linalg.lapack.dgetrs
 BANDED_FROM = 256
 
 #: Slacks at or above this value are eliminated (their weight ``1 / s^2`` is at most 1e4); smaller
-#: ones keep their multiplier as an unknown of the dense system.
+#: ones keep their multiplier as an unknown of the reduced system.
 SLACK_THRESHOLD = 1e-2
 
 
