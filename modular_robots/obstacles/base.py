@@ -107,7 +107,7 @@ class Obstacle(Protocol):
         distance can abort near contact: see :func:`~modular_robots.obstacles.sphere.capsule_sphere`)."""
         ...
 
-    # A closed-form shape may also give (every built-in one does)
+    # A closed-form shape may also give (every built-in one but the capsule does)
     # ``signed_distances(mid (N, 3), axis (N, 3), length (N,), radius (N,), deep=True)``:
     # :meth:`signed_distance` of N capsules at once, as arrays (distances (N,), witness points and
     # gradients (N, 3)); with ``deep=False`` the distance of a capsule whose axis meets the shape
