@@ -8,7 +8,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["rpy_matrix", "segment_parameters", "pose_columns", "golden_minimum", "one_capsule", "SEARCH_STEPS"]
+__all__ = [
+    "rpy_matrix",
+    "segment_parameters",
+    "pose_columns",
+    "golden_minimum",
+    "one_capsule",
+    "axes_in_frame",
+    "witnesses_in_base",
+    "SEARCH_STEPS",
+]
 
 #: Golden-section steps of :func:`golden_minimum`: the bracket shrinks to 0.618^64 (about 1e-13).
 SEARCH_STEPS = 64
@@ -99,3 +108,32 @@ def one_capsule(
         np.asarray(mid, dtype=float)[None], np.asarray(axis, dtype=float)[None], np.array([length]), np.array([radius])
     )
     return float(d[0]), on_robot[0], on_shape[0], None if np.isnan(gradient[0]).any() else gradient[0]
+
+
+def axes_in_frame(
+    rotation: np.ndarray, center: np.ndarray, mid: np.ndarray, axis: np.ndarray, length: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The capsules' axes (midpoints ``mid`` and unit ``axis`` ``(N, 3)``, ``length`` ``(N,)``) in
+    a shape's frame (``rotation``, ``center``): starts and directions ``(N, 3)``."""
+    mid, axis = np.asarray(mid, dtype=float).reshape(-1, 3), np.asarray(axis, dtype=float).reshape(-1, 3)
+    length = np.asarray(length, dtype=float)
+    start = (mid - 0.5 * length[:, None] * axis - center) @ rotation  # rotation^T v, row by row
+    return start, (length[:, None] * axis) @ rotation
+
+
+def witnesses_in_base(
+    rotation: np.ndarray,
+    center: np.ndarray,
+    point: np.ndarray,
+    surface: np.ndarray,
+    normal: np.ndarray,
+    gradient: np.ndarray,
+    radius: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """From a shape's frame to the base: the robot's witness points (the axes' deepest ``point``
+    moved by the capsules' ``radius`` across the ``gradient``, or the ``normal`` where it is
+    zero), the shape's (``surface``) and the gradients, each ``(N, 3)``."""
+    size = np.linalg.norm(gradient, axis=1, keepdims=True)
+    across = np.divide(gradient, size, out=normal.copy(), where=size > 0.0)
+    on_robot = center + (point - np.asarray(radius, dtype=float)[:, None] * across) @ rotation.T
+    return on_robot, center + surface @ rotation.T, gradient @ rotation.T

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._geometry import golden_minimum, one_capsule, pose_columns, rpy_matrix
+from ._geometry import axes_in_frame, golden_minimum, one_capsule, pose_columns, rpy_matrix, witnesses_in_base
 from ._json import json_number, json_vector
 from .base import Obstacle, Witness, members
 
@@ -124,19 +124,14 @@ class CylinderObstacle:
         (:func:`_gradient`) ``(N, 3)``. ``deep`` changes nothing: every distance is exact."""
         rotation, center = rpy_matrix(self.rpy), np.asarray(self.center)
         dimensions = np.array([self.radius, 0.5 * self.length])
-        mid, axis = np.asarray(mid, dtype=float).reshape(-1, 3), np.asarray(axis, dtype=float).reshape(-1, 3)
-        length, radius = np.asarray(length, dtype=float), np.asarray(radius, dtype=float)
-        local_start = (mid - 0.5 * length[:, None] * axis - center) @ rotation  # rotation^T v, row by row
-        local_direction = (length[:, None] * axis) @ rotation
+        local_start, local_direction = axes_in_frame(rotation, center, mid, axis, length)
+        radius = np.asarray(radius, dtype=float)
         along = lambda t: _signed_distance(local_start + t[..., None] * local_direction, dimensions)  # noqa: E731
-        point = local_start + golden_minimum(along, (len(mid),))[:, None] * local_direction
+        point = local_start + golden_minimum(along, (len(local_start),))[:, None] * local_direction
         distance = _signed_distance(point, dimensions)
         surface, normal = _surface_and_normal(point, dimensions, local_direction)
         gradient = _gradient(point, dimensions, local_direction, normal, distance)
-        size = np.linalg.norm(gradient, axis=1, keepdims=True)
-        across = np.divide(gradient, size, out=normal.copy(), where=size > 0.0)  # the robot's witness: across it
-        on_robot = center + (point - radius[:, None] * across) @ rotation.T
-        return distance - radius, on_robot, center + surface @ rotation.T, gradient @ rotation.T
+        return distance - radius, *witnesses_in_base(rotation, center, point, surface, normal, gradient, radius)
 
     @classmethod
     def normals(cls, batch: Any, on_robot: np.ndarray, on_obstacle: np.ndarray) -> np.ndarray:

@@ -153,12 +153,9 @@ def _dense_factor(kkt: BarrierKKT, layout, data, j_in_data, weighted_data, small
     """The reduced system as a dense array, LU-factored by LAPACK: its solve."""
     ny, me, mi, k = kkt.ny, kkt.me, kkt.mi, len(small)
     size = ny + me + k
-    rank = np.full(mi, -1)
-    rank[small] = np.arange(k)
-    in_small = rank[layout.in_row]
-    kept = in_small >= 0
+    rows, cols, values = _small_rows(layout, j_in_data, small, mi)
     j_small = np.zeros((k, ny))
-    j_small.flat[in_small[kept] * ny + layout.in_indices[kept]] = j_in_data[kept]
+    j_small[rows, cols] = values
     j_eq = np.zeros((me, ny))
     j_eq.flat[layout.eq_flat] = data[layout.eq_take]
     dense = np.zeros((mi, ny))
@@ -187,11 +184,8 @@ def _reduced_sparse(kkt: BarrierKKT, layout, data, j_in_data, weighted_data, sma
     weighted = kkt._weighted_t.matrix
     normal = (weighted.T @ weighted).tocoo()
     eq_rows, eq_cols = np.divmod(layout.eq_flat, ny)
-    rank = np.full(mi, -1)
-    rank[small] = np.arange(k)
-    in_small = rank[layout.in_row]
-    kept = in_small >= 0
-    small_rows, small_cols = ny + me + in_small[kept], layout.in_indices[kept]
+    rows, small_cols, small_values = _small_rows(layout, j_in_data, small, mi)
+    small_rows = ny + me + rows
     diagonal = np.arange(ny)
     small_diagonal = np.arange(ny + me, ny + me + k)
     rows = np.concatenate([normal.row, diagonal, ny + eq_rows, eq_cols, small_rows, small_cols, small_diagonal])
@@ -202,13 +196,23 @@ def _reduced_sparse(kkt: BarrierKKT, layout, data, j_in_data, weighted_data, sma
             np.ones(ny),
             data[layout.eq_take],
             data[layout.eq_take],
-            j_in_data[kept],
-            j_in_data[kept],
+            small_values,
+            small_values,
             -(kkt._s_small**2),
         ]
     )
     size = ny + me + k
     return sparse.coo_array((values, (rows, cols)), shape=(size, size)).tocsr()  # duplicates summed
+
+
+def _small_rows(layout, j_in_data, small, mi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The entries of the inequality rows whose slack is small (their multipliers stay in the
+    reduced system): rows numbered among those rows (in ``small``'s order), columns, values."""
+    rank = np.full(mi, -1)
+    rank[small] = np.arange(len(small))
+    in_small = rank[layout.in_row]
+    kept = in_small >= 0
+    return in_small[kept], layout.in_indices[kept], j_in_data[kept]
 
 
 def _norm(x: np.ndarray) -> float:
