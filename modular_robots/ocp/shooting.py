@@ -5,7 +5,8 @@ Decision variables, scaled to order one: the final time ``tf``, the interior nod
 ``s_1 .. s_{N-1}`` (``s_0`` and ``s_N`` are the fixed rest states at ``q_start`` and ``q_goal``)
 and one control per interval ``u_0 .. u_{N-1}``. Constraints: continuity ``Phi(s_m, u_m, tf) =
 s_{m+1}``; position and velocity limits at every integration sub-step (plain bounds at the
-nodes); obstacle clearance ``>= margin`` at every sub-step, and the distance of every checked pair
+nodes); obstacle clearance ``>= margin`` at every sub-step (less for an obstacle near the start, a
+goal or the end: :func:`end_margins`), and the distance of every checked pair
 of the robot's own primitives that can come that close (:mod:`~modular_robots.self_collision`) too
 (a pair never sampled twice the margin apart, or nearer than that at the start or the goal: half the smaller distance);
 torque limits (plain bounds when the controls are torques, else at every sub-step). Jacobians are
@@ -54,7 +55,7 @@ from .hessian import kinematic_hessians, rnea_curvature, torque_hessians
 from .route import NO_ROUTE, Route, route_cost_bound
 from .transcription import Propagation, positive_or_one, transcription
 
-__all__ = ["ShootingProblem", "NonFiniteError", "Evaluation"]
+__all__ = ["ShootingProblem", "NonFiniteError", "Evaluation", "end_margins"]
 
 
 class NonFiniteError(ModularRobotsError, ArithmeticError):
@@ -89,6 +90,21 @@ class _RouteRows:
     node: int
     ref: int | None = None
     end: ToolEnd | None = None
+
+
+def end_margins(margin: float, at_ends: np.ndarray) -> np.ndarray:
+    """The clearance [m] the rows keep from each obstacle, given the ``margin`` and each
+    obstacle's smallest distance to the robot at the start, the goals and the end ``at_ends``.
+
+    Step B holds those configurations to no overlap only. An obstacle nearer than the margin there
+    would ask the sub-steps next to a fixed end for more than a motion at rest there can give, and
+    the row at a free end for more than the end has. So the rows keep the margin, or less by as
+    much as leaves half the margin between the nearest end and its rows (``d - margin / 2``), and
+    at least half the end's distance: ``min(margin, max(d / 2, d - margin / 2))``, continuous in
+    ``d`` and the margin itself from ``d = 1.5 margin`` on.
+    """
+    d = np.asarray(at_ends, dtype=float)
+    return np.minimum(margin, np.maximum(0.5 * d, d - 0.5 * margin))
 
 
 class ShootingProblem:
@@ -231,6 +247,11 @@ class ShootingProblem:
                 settings.clearance_margin,
                 0.5 * np.minimum(self.self_collision.farthest, at_ends)[self._self_rows],
             )
+        #: Each obstacle's clearance the rows keep [m] (:func:`end_margins`).
+        self._obstacle_margins = np.zeros(0)
+        if self.collision is not None:
+            at_ends = self.collision.closest_many(self.chain())[0].min(axis=0)
+            self._obstacle_margins = end_margins(settings.clearance_margin, at_ends)
         N = self.intervals
         #: The tool poses the free ends keep (None: the ends are fixed at ``q_start``, ``q_goal``).
         self.free_ends = free_ends
@@ -503,9 +524,7 @@ class ShootingProblem:
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (self._x_lo[:nv], self._x_hi[:nv]))
                 sc = np.broadcast_to(self.x_scale[:nv], (N, k, r))
             elif name == "clearance":
-                margins = np.full(r, self.settings.clearance_margin)
-                margins[r - len(self._self_margins) :] = self._self_margins
-                lo, hi = np.broadcast_to(margins, (N, k, r)), np.full((N, k, r), np.inf)
+                lo, hi = np.broadcast_to(self.clearance_margins, (N, k, r)), np.full((N, k, r), np.inf)
                 sc = np.ones((N, k, r))
             else:
                 lo, hi = (np.broadcast_to(b, (N, k, r)) for b in (-self.effort_bound, self.effort_bound))
@@ -520,9 +539,7 @@ class ShootingProblem:
             end_columns = np.vstack([np.tile(q0, (start_end.size, 1)), np.tile(qN, (goal_end.size + pairs, 1))])
             rows["ends"] = start + np.arange(len(end_columns))
             (start_lo, start_hi), (goal_lo, goal_hi) = start_end.bounds(), goal_end.bounds()
-            clear_lo = np.full(pairs, self.settings.clearance_margin)
-            clear_lo[pairs - len(self._self_margins) :] = self._self_margins
-            lower_parts.append(np.concatenate([start_lo, goal_lo, clear_lo]))
+            lower_parts.append(np.concatenate([start_lo, goal_lo, self.clearance_margins]))
             upper_parts.append(np.concatenate([start_hi, goal_hi, np.full(pairs, np.inf)]))
             scale_parts.append(np.ones(len(end_columns)))
         self._route_groups = self._route_layout()
@@ -851,6 +868,12 @@ class ShootingProblem:
         (d1, g1), (d2, g2) = parts
         grad = None if g1 is None or g2 is None else np.concatenate([g1, g2], axis=1)
         return np.concatenate([d1, d2], axis=1), grad
+
+    @property
+    def clearance_margins(self) -> np.ndarray:
+        """The least distance [m] each clearance row of a sub-step keeps: every obstacle's, then
+        every checked pair's of the robot's own (:attr:`self_collision_rows`), ``(r,)``."""
+        return np.concatenate([self._obstacle_margins, self._self_margins])
 
     @property
     def self_collision_rows(self) -> np.ndarray:
