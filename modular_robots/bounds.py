@@ -169,8 +169,8 @@ def tool_speed_limit(composition: Composition, catalog: Catalog) -> float:
     if catalog.general:
         frame, partial, revolute, stroke, prismatic = _general_speed(catalog, composition.modules)
         speed = partial + prismatic
-        if revolute:
-            speed += revolute * (float(np.linalg.norm((frame @ RX_PI)[:3, 3])) + stroke)
+        if revolute:  # Rx(pi) moves no origin: the tool's is the frame's own
+            speed += revolute * (_distance(frame, _ORIGIN) + stroke)
     else:
         speed = sum(lever.speed for lever in joint_levers(composition, catalog))
     return float(speed) if math.isfinite(speed) else math.inf
@@ -191,7 +191,7 @@ def _general_speed(catalog: Catalog, modules: tuple[str, ...]) -> tuple[np.ndarr
     frame = frame @ inlet
     for joint, parent, child in steps:
         if revolute or prismatic:
-            partial += revolute * (float(np.linalg.norm((frame @ parent)[:3, 3])) + stroke)
+            partial += revolute * (_distance(frame, parent[:, 3]) + stroke)
         if joint.type == "prismatic":
             prismatic += joint.velocity
             stroke = max(abs(joint.lower), abs(joint.upper))
@@ -200,6 +200,17 @@ def _general_speed(catalog: Catalog, modules: tuple[str, ...]) -> tuple[np.ndarr
             stroke = 0.0
         frame = child
     return frame @ outlet, partial, revolute, stroke, prismatic
+
+
+_ORIGIN = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _distance(frame: np.ndarray, point: np.ndarray) -> float:
+    """The norm of ``frame @ point``'s position (``point`` homogeneous): what
+    ``np.linalg.norm((frame @ pose)[:3, 3])`` gives for a pose whose last column is ``point``, at a
+    third of its cost (the first pass bounds millions of assemblies)."""
+    x, y, z, _ = (frame @ point).tolist()
+    return math.sqrt(x * x + y * y + z * z)
 
 
 def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolerance: float) -> CatalogBound:
