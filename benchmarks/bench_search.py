@@ -7,6 +7,10 @@ once, by ``python -m benchmarks.bench_search --reference``, and committed as
 ``benchmarks/results/search-reference.json`` with their times; ``make bench`` runs the searches
 and checks their winners against it. The search's first estimate of the step B still ahead, and
 the step B it then took, are recorded beside each other.
+
+``--full`` searches the 40,960,000 six-joint assemblies of the whole IMPROV catalogue
+(``scenarios/improv-six-joints-pick.yaml``) within a budget of 55 minutes: no exhaustive run to
+compare with, a winner and its gap (:func:`full`, not part of ``make bench``).
 """
 
 from __future__ import annotations
@@ -24,6 +28,10 @@ from ._common import RESULTS, commit, machine, table, write
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = [ROOT / "scenarios" / "paper-5kg.yaml", ROOT / "scenarios" / "improv-science2019-pick.yaml"]
 REFERENCE = RESULTS / "search-reference.json"
+#: The whole IMPROV catalogue's six-joint space, searched within a budget (:func:`full`).
+FULL = ROOT / "scenarios" / "improv-six-joints-pick.yaml"
+FULL_BUDGET = 3300
+FULL_OPTIONS = ("--search", "best-first", "--budget", str(FULL_BUDGET), "--max-compositions", "41000000")
 
 
 def _run(scenario: Path, out: Path, *options: str) -> tuple[float, dict]:
@@ -60,6 +68,35 @@ def reference() -> None:
     )
 
 
+def search_row(scenario: str, wall: float, document: dict, expected: dict) -> dict:
+    """One search's figures from its ``result.json`` (``expected``: the exhaustive run's row, if any)."""
+    search, seconds = document["search"], document["seconds"]
+    certificate = search["certificate"]
+    estimate = search.get("first_estimate") or {}
+    winner = document.get("winner") or {}
+    return {
+        "scenario": scenario,
+        "space": certificate["space"],
+        "wall_s": wall,
+        "ended": certificate.get("ended"),
+        "step_b_s": seconds["feasibility"],
+        "steps_cd_s": seconds["optimization"],
+        "step_b_checked": search["progress"]["step_b"],
+        "step_b_relaxed": search["progress"]["step_b_relaxed"],
+        "candidates": search["progress"]["candidates"],
+        "winner": winner.get("composition"),
+        "cost": winner.get("cost"),
+        "certified": certificate["certified_optimal"],
+        "gap": certificate["gap"],
+        "ratio_pruned": certificate["pruned_by_ratio"],
+        "exhaustive_winner": expected.get("winner"),
+        "same_winner": expected.get("winner") == winner.get("composition") if expected else None,
+        "exhaustive_wall_s": expected.get("wall_s"),
+        "first_estimate_at_s": estimate.get("at_s"),
+        "first_estimate_step_b_s": estimate.get("step_b_left_s"),
+    }
+
+
 def main() -> None:
     references = {r["scenario"]: r for r in json.loads(REFERENCE.read_text())["rows"]} if REFERENCE.exists() else {}
     rows = []
@@ -67,35 +104,27 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for scenario in SCENARIOS:
             wall, document = _run(scenario, Path(tmp) / scenario.stem, "--search", "best-first")
-            search, seconds = document["search"], document["seconds"]
-            certificate = search["certificate"]
-            expected = references.get(scenario.stem, {})
-            estimate = search.get("first_estimate") or {}
-            rows.append(
-                {
-                    "scenario": scenario.stem,
-                    "space": certificate["space"],
-                    "wall_s": wall,
-                    "step_b_s": seconds["feasibility"],
-                    "steps_cd_s": seconds["optimization"],
-                    "step_b_checked": search["progress"]["step_b"],
-                    "step_b_relaxed": search["progress"]["step_b_relaxed"],
-                    "candidates": search["progress"]["candidates"],
-                    "winner": document["winner"]["composition"],
-                    "cost": document["winner"]["cost"],
-                    "certified": certificate["certified_optimal"],
-                    "gap": certificate["gap"],
-                    "ratio_pruned": certificate["pruned_by_ratio"],
-                    "exhaustive_winner": expected.get("winner"),
-                    "same_winner": expected.get("winner") == document["winner"]["composition"] if expected else None,
-                    "exhaustive_wall_s": expected.get("wall_s"),
-                    "first_estimate_at_s": estimate.get("at_s"),
-                    "first_estimate_step_b_s": estimate.get("step_b_left_s"),
-                }
-            )
+            rows.append(search_row(scenario.stem, wall, document, references.get(scenario.stem, {})))
     print(table(rows))
     write("search", rows, {"load_average_before": load_before, "load_average_after": os.getloadavg()[0]})
 
 
+def full() -> None:
+    """The six-joint assemblies of the whole IMPROV catalogue (:data:`FULL`, 40,960,000) within
+    :data:`FULL_BUDGET`: written to ``results/search-full.json`` (about an hour: not part of
+    ``make bench``; ``python -m benchmarks.bench_search --full``)."""
+    load_before = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        wall, document = _run(FULL, Path(tmp) / FULL.stem, *FULL_OPTIONS)
+    row = search_row(FULL.stem, wall, document, {})
+    print(table([row]))
+    write("search-full", [row], {"load_average_before": load_before, "load_average_after": os.getloadavg()[0]})
+
+
 if __name__ == "__main__":
-    reference() if "--reference" in sys.argv[1:] else main()
+    if "--reference" in sys.argv[1:]:
+        reference()
+    elif "--full" in sys.argv[1:]:
+        full()
+    else:
+        main()

@@ -79,10 +79,16 @@ def test_compatibility_refuses_mismatched_connectors():
 
 
 def test_committed_catalogues_are_the_importer_output():
-    for name, source in (("improv", IMPROV_JSON), ("geometric", GEOMETRIC_JSON), ("geometric-6dof", GEOMETRIC_JSON)):
+    for name, source in (
+        ("improv", IMPROV_JSON),
+        ("improv-six-joints", IMPROV_JSON),
+        ("geometric", GEOMETRIC_JSON),
+        ("geometric-6dof", GEOMETRIC_JSON),
+    ):
         result = import_timor(source, CATALOGS / "timor" / f"{name}.overrides.yaml")
         assert_same_catalogue(result.yaml(), (CATALOGS / f"{name}.yaml").read_text("utf-8"))
     assert count_compositions(load_catalog(CATALOGS / "geometric-6dof.yaml")) == {6: 4**5}
+    assert count_compositions(load_catalog(CATALOGS / "improv-six-joints.yaml")) == {6: 40_960_000}
 
 
 def test_import_names_the_decisions_it_needs(tmp_path):
