@@ -577,6 +577,12 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
     with LiveLine() as live:
 
         def progress(stage, f):
+            if stage == "pass":  # listing and bounding the space, before (or between) the steps
+                live.show(
+                    f"search: pass {f['pass']} over the space, {f['bounded']:,} of {f['space']:,} compositions "
+                    f"bounded, about {f['eta']:.0f} s left"
+                )
+                return
             last.update(f)
             best = "-" if f["best"] is None else f"{f['best']:.4g}"
             lowest = "-" if f["lowest_bound"] is None else f"{f['lowest_bound']:.4g}"

@@ -88,6 +88,10 @@ FORMAT = 1
 #: twice this over the slowest joint's limit.
 _CLUSTER = 1e-3
 
+#: While a pass lists and bounds the space, its progress is reported this often [s] (a
+#: ``("pass", figures)`` call of ``on_progress``: ``pass``, ``bounded``, ``space``, ``eta`` [s]).
+PASS_PROGRESS = 2.0
+
 #: Frontier kinds: a composition not checked yet, one through the relaxed step B, a candidate.
 _UNCHECKED, _RELAXED, _CANDIDATE = 0, 1, 2
 _BOUND_NAME = {_UNCHECKED: TOOL_SPEED, _RELAXED: IK_TRAVEL, _CANDIDATE: JOINT_TRAVEL}
@@ -139,7 +143,8 @@ def search_scenario(
     (with ``search.jsonl``, resumed if it is there) and the certificate (in ``result.json``).
 
     Parameters are those of :func:`~modular_robots.pipeline.run_scenario`, and ``settings``.
-    ``on_progress`` is called with ``("search", figures)`` after every step. ``max_compositions``
+    ``on_progress`` is called with ``("search", figures)`` after every step, and with
+    ``("pass", figures)`` every :data:`PASS_PROGRESS` seconds of a pass over a large space. ``max_compositions``
     (default: none) refuses a larger space before any work.
 
     Raises
@@ -192,6 +197,7 @@ class _Search:
             {_UNCHECKED: feasibility.relaxed(), _RELAXED: feasibility},
         )
         self.first_estimate: dict | None = None
+        self.passes = 0  # passes over the space so far (:meth:`_take_pass`)
 
     # -- the loop ---------------------------------------------------------------------------------
     def run(self) -> SearchResult:
@@ -286,11 +292,19 @@ class _Search:
         keep = self.settings.frontier
         kept: list[tuple[float, int, Composition]] = []  # a max-heap by key: (-bound, -index)
         beyond, smallest = 0, math.inf
+        self.passes += 1
+        started = shown = time.perf_counter()
         for index, composition in enumerate(enumerate_compositions(self.scenario.catalog)):
-            if index % 4096 == 0 and time.perf_counter() >= deadline:
-                unknown = self.space - self.passed - len(kept) - beyond
-                beyond, smallest = beyond + unknown, 0.0
-                break
+            if index % 4096 == 0:
+                now = time.perf_counter()
+                if now >= deadline:
+                    unknown = self.space - self.passed - len(kept) - beyond
+                    beyond, smallest = beyond + unknown, 0.0
+                    break
+                if index and now - shown >= PASS_PROGRESS:
+                    shown = now
+                    left = (self.space - index) * (now - started) / index
+                    self.notify("pass", {"pass": self.passes, "bounded": index, "space": self.space, "eta": left})
             bound = catalog_bound(composition, self.scenario.catalog, self.scenario.task, self.tolerance).value
             key = (bound, index)
             if after is not None and key <= after:

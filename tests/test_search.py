@@ -27,7 +27,7 @@ from modular_robots.plan.candidate import CandidateResult
 from modular_robots.pruning import bound_rule
 from modular_robots.search import STATE, SearchSettings, search_scenario
 
-from .helpers.paths import SMALL
+from .helpers.paths import ROOT, SMALL
 
 FAST = SMALL.with_name("small-fast.yaml")
 
@@ -218,3 +218,27 @@ def test_run_prints_the_certificate_and_refuses_a_budget_without_the_search(tmp_
     assert "certified optimal among 516 compositions" in line
     line = next(line for line in result.output.splitlines() if line.startswith("compositions"))
     assert line.split(None, 1)[1].startswith("516 in the space: ") and "through the whole step B" in line
+
+
+def test_a_pass_over_a_large_space_reports_its_progress(monkeypatch, tmp_path):
+    """Listing and bounding 40,960,000 assemblies takes tens of minutes before any step B: the
+    pass says how far it is and how long it has left (here cut by a budget of 1.5 s)."""
+    monkeypatch.setattr(search_module, "PASS_PROGRESS", 0.25)
+    scenario = load_scenario(ROOT / "scenarios" / "improv-six-joints-pick.yaml")
+    seen: list[dict] = []
+    with pytest.raises(InfeasibleError, match="budget"):
+        search_scenario(
+            scenario,
+            tmp_path / "out",
+            jobs=1,
+            settings=SearchSettings(budget=1.5),
+            on_progress=lambda stage, figures: seen.append(figures) if stage == "pass" else None,
+        )
+    assert len(seen) >= 2
+    bounded = [f["bounded"] for f in seen]
+    assert bounded == sorted(bounded) and bounded[0] > 0 and bounded[-1] < 40_960_000
+    assert all(f["space"] == 40_960_000 and f["pass"] == 1 for f in seen)
+    # the time left, at the rate so far: the whole pass takes far longer than the budget
+    assert all(f["eta"] > 60.0 for f in seen)
+    document = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert document["search"]["certificate"]["ended"] == "budget"
