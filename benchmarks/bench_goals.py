@@ -13,7 +13,8 @@
   task without one says which test of step B removed its assemblies.
 
 ``GOALS_TASKS=PTP_1,PTP_2 GOALS_CATALOGS=improv-6dof python -m benchmarks goals`` runs the named
-CoBRA tasks and catalogues only (and keeps the rows measured before for the others).
+CoBRA tasks and catalogues only (and keeps the rows measured before for the others);
+``GOALS_BUDGET=2400`` gives the best-first searches that budget [s] instead of theirs.
 """
 
 from __future__ import annotations
@@ -76,6 +77,9 @@ def _cobra(task: str, catalog: str, options: tuple[str, ...], tmp: Path) -> dict
     sys.path.insert(0, str(ROOT))
     from tests.helpers.cobra_check import check_solution
 
+    budget = os.environ.get("GOALS_BUDGET")
+    if budget and "--budget" in options:
+        options = (*options[: options.index("--budget") + 1], budget, *options[options.index("--budget") + 2 :])
     scenario = tmp / catalog / f"{task}.yaml"
     command = [
         sys.executable,
@@ -92,6 +96,8 @@ def _cobra(task: str, catalog: str, options: tuple[str, ...], tmp: Path) -> dict
     out = tmp / catalog / f"{task}-run"
     document, wall, last = _run(scenario, out, *options)
     row = _row(task, catalog, document, wall, last)
+    if "--budget" in options:
+        row["budget_s"] = float(options[options.index("--budget") + 1])
     solution = out / "cobra-solution.json"
     row["cobra_check"] = None
     if solution.is_file():

@@ -356,7 +356,8 @@ def _goals_lines() -> list[str]:
         _measured(doc)
         + f" Load average {doc['load_average_before']:.1f} before, {doc['load_average_after']:.1f} after; each row "
         "one `run` as a whole process on 2 cores (CoBRA's tasks after `import-cobra`; the Science2019 and "
-        "geometric-6dof spaces by the best-first search within 720 s and 480 s, certified where it says yes).",
+        "geometric-6dof spaces by the best-first search within 720 s and 480 s, or the budget given, certified "
+        "where it says yes).",
         "",
         "| task | catalogue | feasible | verified / candidates | wall s | winner | cycle time s | moves end at s | "
         "certified | CoBRA check | why no winner |",
@@ -370,7 +371,9 @@ def _goals_lines() -> list[str]:
             check = f"passed ({r['rows']} rows, position {error:.2g} m, angle {angle:.2g} rad)"
         lines.append(
             f"| {r['task']} | {r['catalog']} | {r['feasible'] if r['feasible'] is not None else '-'} | "
-            f"{r['verified']} / {r['candidates']} | {_fmt(r['wall_s'])} | {r['winner'] or '-'} | "
+            f"{r['verified']} / {r['candidates']} | {_fmt(r['wall_s'])}"
+            + (f" (budget {r['budget_s']:g})" if r.get("budget_s") else "")
+            + f" | {r['winner'] or '-'} | "
             f"{_fmt(r['cycle_s'], 4) if r['cycle_s'] is not None else '-'} | {stops} | "
             f"{ {True: 'yes', False: 'no'}.get(r.get('certified'), '-') } | {check} | "
             f"{r['why_none'] or ''} |"
