@@ -119,7 +119,7 @@ def _general_levers(composition: Composition, catalog: Catalog) -> tuple[Lever, 
     :meth:`~modular_robots.robot.RobotModel.tool_speed_bound`, from catalogue numbers)."""
     frame, pieces, joints, stroke = _general_walk(catalog, composition.modules)
     if joints:
-        pieces = (*pieces, float(np.linalg.norm((frame @ RX_PI)[:3, 3])) + stroke)
+        pieces = (*pieces, _distance(frame, _ORIGIN) + stroke)
     after = np.cumsum(pieces[::-1])[::-1]  # the pieces from each joint's origin to the tool
     return tuple(
         Lever(joint.type == "prismatic", joint.velocity, 0.0 if joint.type == "prismatic" else float(rest))
@@ -141,7 +141,7 @@ def _general_walk(
     frame = frame @ inlet
     for joint, parent, child in steps:
         if joints:
-            pieces = (*pieces, float(np.linalg.norm((frame @ parent)[:3, 3])) + stroke)
+            pieces = (*pieces, _distance(frame, parent[:, 3]) + stroke)
         joints = (*joints, joint)
         stroke = max(abs(joint.lower), abs(joint.upper)) if joint.type == "prismatic" else 0.0
         frame = child
