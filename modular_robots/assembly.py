@@ -19,15 +19,26 @@ order (a whitelist's ids in the slot's order).
 from __future__ import annotations
 
 import itertools
+import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
 from functools import cache
 from typing import cast
 
 from .catalog import Catalog
 from .modules import AssemblyGrammar, Connector, GeneralModule, RunPattern
 
-__all__ = ["count_assemblies", "enumerate_assemblies", "assembly_error", "KEEP_RUNS", "pool", "product"]
+__all__ = [
+    "AssemblyBlock",
+    "assembly_blocks",
+    "count_assemblies",
+    "enumerate_assemblies",
+    "assembly_error",
+    "KEEP_RUNS",
+    "pool",
+    "product",
+]
 
 Ids = tuple[str, ...]
 #: A connector as compatibility sees it: gender, type and size (:meth:`Connector.meets`).
@@ -71,6 +82,50 @@ def product(pools: Sequence[Iterable[Ids]]) -> Iterator[tuple[Ids, ...]]:
             yield from walk(i + 1, (*done, item))
 
     yield from walk(0, ())
+
+
+@dataclass(frozen=True, eq=False)
+class AssemblyBlock:
+    """The assemblies of one ``base``, sequence of joint modules and ``effector``: one link run
+    from each of ``gaps`` (after the base, between consecutive joint modules, before the
+    effector), listed as :func:`product` walks them, the last gap fastest. Every one has ``dof``
+    joints (the base's and the effector's included)."""
+
+    base: str
+    joints: Ids
+    effector: str
+    gaps: tuple[Iterable[Ids], ...]
+    dof: int
+
+    @property
+    def shape(self) -> tuple[int, ...] | None:
+        """The number of runs in each gap, when every gap is held in memory (None otherwise)."""
+        if not all(isinstance(gap, tuple) for gap in self.gaps):
+            return None
+        return tuple(len(cast("tuple[Ids, ...]", gap)) for gap in self.gaps)
+
+    @property
+    def size(self) -> int | None:
+        """The number of assemblies, when :attr:`shape` is known."""
+        shape = self.shape
+        return None if shape is None else math.prod(shape)
+
+    def assembly(self, runs: Sequence[Ids]) -> Ids:
+        """The module ids of the assembly with one run per gap."""
+        ids = [self.base, *runs[0]]
+        for joint, run in zip(self.joints, runs[1:], strict=True):
+            ids += [joint, *run]
+        return (*ids, self.effector)
+
+    def assemblies(self) -> Iterator[Ids]:
+        """Every assembly of the block, in order."""
+        for runs in product(self.gaps):
+            yield self.assembly(runs)
+
+    def at(self, choice: Sequence[int]) -> Ids:
+        """The assembly of run ``choice[g]`` of each gap ``g`` (gaps held in memory)."""
+        gaps = cast("tuple[tuple[Ids, ...], ...]", self.gaps)
+        return self.assembly([gap[i] for gap, i in zip(gaps, choice, strict=True)])
 
 
 def _kind(connector: Connector) -> Kind:
@@ -334,16 +389,12 @@ class _Space:
         gaps += [self.count_runs("between", self.outlet[a], self.inlet[b]) for a, b in itertools.pairwise(seq)]
         return [*gaps, self.count_runs("end", self.outlet[seq[-1]], self.inlet[effector])]
 
-    def fill(self, base: str, seq: Ids, effector: str) -> Iterator[Ids]:
-        """Every assembly of ``base``, the joint modules ``seq`` and ``effector``."""
+    def block(self, base: str, seq: Ids, effector: str, dof: int) -> AssemblyBlock:
+        """Every assembly of ``base``, the joint modules ``seq`` (``dof`` joints) and ``effector``."""
         gaps = [self.runs("start", self.outlet[base], self.inlet[seq[0]])]
         gaps += [self.runs("between", self.outlet[a], self.inlet[b]) for a, b in itertools.pairwise(seq)]
         gaps.append(self.runs("end", self.outlet[seq[-1]], self.inlet[effector]))
-        for runs in product(gaps):
-            ids = [base, *runs[0]]
-            for joint, run in zip(seq, runs[1:]):
-                ids += [joint, *run]
-            yield (*ids, effector)
+        return AssemblyBlock(base, seq, effector, tuple(gaps), dof + self.dof(base) + self.dof(effector))
 
 
 def _first_choice(pattern: RunPattern, run: Ids) -> Choice | None:
@@ -391,16 +442,24 @@ def count_assemblies(catalog: Catalog, dof: int | None = None) -> dict[int, int]
 def enumerate_assemblies(catalog: Catalog, dof: int | None = None) -> Iterator[Ids]:
     """Yield the module ids of every assembly, once each, DOF ascending: each after a bounded
     amount of work, in bounded memory (see the module's docstring)."""
+    for block in assembly_blocks(catalog, dof):
+        yield from block.assemblies()
+
+
+def assembly_blocks(catalog: Catalog, dof: int | None = None) -> Iterator[AssemblyBlock]:
+    """The assemblies of :func:`enumerate_assemblies`, in its order, as blocks of one base,
+    joint-module sequence and effector: a block's runs are shared, so what is computed per run (a
+    bound, :func:`~modular_robots.bounds.block_speed_limits`) serves every assembly of it."""
     space = _Space(catalog)
     for d in _dof_range(catalog, dof):
         for base, effector in itertools.product(space.bases, space.effectors):
             if d == 0:
                 if _allows_no_joint(space.grammar):
-                    for run in space.runs("end", space.outlet[base], space.inlet[effector]):
-                        yield (base, *run, effector)
+                    runs = space.runs("end", space.outlet[base], space.inlet[effector])
+                    yield AssemblyBlock(base, (), effector, (runs,), space.dof(base) + space.dof(effector))
                 continue
             for seq in space.sequences(base, effector, d):
-                yield from space.fill(base, seq, effector)
+                yield space.block(base, seq, effector, d)
 
 
 def assembly_error(catalog: Catalog, ids: Ids) -> str | None:

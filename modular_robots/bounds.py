@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import functools
 import math
+import typing
 from dataclasses import dataclass
 
 import numpy as np
 
+from .assembly import AssemblyBlock
 from .catalog import Catalog
 from .composition import Composition
 from .costs import COSTS, Design, DesignCost, Objective, design_of
@@ -40,7 +42,9 @@ __all__ = [
     "CatalogBound",
     "joint_levers",
     "tool_speed_limit",
+    "block_speed_limits",
     "catalog_bound",
+    "block_bounds",
     "objective_bound",
     "TOOL_SPEED",
     "IK_TRAVEL",
@@ -192,17 +196,89 @@ def _general_speed(catalog: Catalog, modules: tuple[str, ...]) -> tuple[np.ndarr
     for joint, parent, child in steps:
         if revolute or prismatic:
             partial += revolute * (_distance(frame, parent[:, 3]) + stroke)
-        if joint.type == "prismatic":
-            prismatic += joint.velocity
-            stroke = max(abs(joint.lower), abs(joint.upper))
-        else:
-            revolute += joint.velocity
-            stroke = 0.0
+        revolute, prismatic, stroke = _past(joint, revolute, prismatic)
         frame = child
     return frame @ outlet, partial, revolute, stroke, prismatic
 
 
+def _past(joint: Joint, revolute: float, prismatic: float) -> tuple[float, float, float]:
+    """The revolute and the prismatic joints' summed velocity limits once past ``joint``, and its
+    stroke (0 for a revolute joint)."""
+    if joint.type == "prismatic":
+        return revolute, prismatic + joint.velocity, max(abs(joint.lower), abs(joint.upper))
+    return revolute + joint.velocity, prismatic, 0.0
+
+
 _ORIGIN = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def block_speed_limits(catalog: Catalog, block: AssemblyBlock) -> np.ndarray | None:
+    """:func:`tool_speed_limit` of every assembly of ``block`` at once, equal to the last bit:
+    an array with an axis per gap (:attr:`~modular_robots.assembly.AssemblyBlock.shape`, the
+    assemblies in the block's order when flattened). None where it does not apply: a catalogue of
+    convention A, a gap not held in memory, a base, link or effector module with joints.
+
+    The piece from a joint's origin to the next one's (or to the tool) depends only on the
+    modules between them, so a gap's pieces are measured once per run, and the running sum of
+    :func:`_general_speed` becomes an outer sum over the gaps, term by term in its order."""
+    shape = block.shape
+    if not catalog.general or shape is None or not _jointless(catalog, block):
+        return None
+    gaps = typing.cast("tuple[tuple[tuple[str, ...], ...], ...]", block.gaps)
+    partial = np.zeros(())
+    revolute = prismatic = stroke = 0.0
+    before = block.base
+    for gap, module in zip(gaps, block.joints, strict=False):
+        steps = _module_frames(catalog, module)[1]
+        if revolute or prismatic:
+            pieces = _gap_pieces(catalog, before, gap, module)
+            partial = partial[..., None] + revolute * (pieces + stroke)
+        else:
+            partial = np.repeat(partial[..., None], len(gap), axis=-1)
+        for k, (joint, parent, _) in enumerate(steps):
+            if k and (revolute or prismatic):
+                partial = partial + revolute * (_distance(steps[k - 1][2], parent[:, 3]) + stroke)
+            revolute, prismatic, stroke = _past(joint, revolute, prismatic)
+        before = module
+    speed = partial + prismatic
+    if revolute:
+        speed = speed[..., None] + revolute * (_gap_pieces(catalog, before, gaps[-1], block.effector) + stroke)
+    else:
+        speed = np.repeat(speed[..., None], len(gaps[-1]), axis=-1)
+    return np.where(np.isfinite(speed), speed, math.inf)
+
+
+def _jointless(catalog: Catalog, block: AssemblyBlock) -> bool:
+    """Whether the block's base, effector and link modules have no joints."""
+    links = _link_ids(catalog)
+    return not (_module_frames(catalog, block.base)[1] or _module_frames(catalog, block.effector)[1]) and all(
+        not _module_frames(catalog, m)[1] for m in links
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def _link_ids(catalog: Catalog) -> tuple[str, ...]:
+    return tuple(m.id for m in catalog.modules if catalog.general_module(m.id).kind == "link")
+
+
+@functools.lru_cache(maxsize=4096)
+def _gap_pieces(catalog: Catalog, before: str, gap: tuple[tuple[str, ...], ...], after: str) -> np.ndarray:
+    """For each run of ``gap``: the distance from the last joint's origin of module ``before``
+    to the first joint's origin of ``after`` (to its outlet, the tool, for an effector without
+    joints), through the run, each frame composed as :func:`_general_speed` composes it."""
+    start = _module_frames(catalog, before)
+    assert start[1], "a joint module before every gap that moves the tool"
+    origin = start[1][-1][2] @ start[2]
+    inlet, steps, outlet = _module_frames(catalog, after)
+    pieces = np.empty(len(gap))
+    for i, run in enumerate(gap):
+        frame = origin
+        for module in run:
+            m_inlet, _, m_outlet = _module_frames(catalog, module)
+            frame = frame @ m_inlet @ m_outlet
+        frame = frame @ inlet
+        pieces[i] = _distance(frame, steps[0][1][:, 3]) if steps else _distance(frame @ outlet, _ORIGIN)
+    return pieces
 
 
 def _distance(frame: np.ndarray, point: np.ndarray) -> float:
@@ -227,18 +303,7 @@ def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolera
     time = 0.0
     if objective.counts_time:
         speed = tool_speed_limit(composition, catalog) * (1.0 + LIMIT_TOLERANCE)
-        if task.goals:
-            gap = tool_path_gap(task.start, task.start_tolerance or tolerance, task.goals, tolerance)
-            gap -= TERMINAL_TOLERANCE + GOAL_TOLERANCE * sum(g.moves for g in task.goals)
-            paused = math.fsum(g.duration for g in task.goals)
-        else:
-            gap = (
-                math.dist(task.start, task.goal)
-                - (task.start_tolerance or tolerance)
-                - (task.goal_tolerance or tolerance)
-            )
-            gap -= TERMINAL_TOLERANCE
-            paused = 0.0
+        gap, paused = _task_gap(task, tolerance)
         time = (max(gap, 0.0) / speed if 0.0 < speed < math.inf else 0.0) + paused
     value = objective_bound(
         objective, time, design_of(composition.modules, catalog) if objective.counts_design else None
@@ -246,6 +311,37 @@ def catalog_bound(composition: Composition, catalog: Catalog, task: Task, tolera
     if value <= 0.0:
         return CatalogBound("none", 0.0)
     return CatalogBound(TOOL_SPEED if time > 0.0 else DESIGN, value)
+
+
+def block_bounds(block: AssemblyBlock, catalog: Catalog, task: Task, tolerance: float) -> np.ndarray | None:
+    """:func:`catalog_bound`'s values for every assembly of ``block``, equal to the last bit, in
+    the block's order (flattened). None where :func:`block_speed_limits` does not apply or the
+    objective has a cost of the design (whose bound is computed per composition)."""
+    objective = task.cost
+    if objective.counts_design or not objective.counts_time:
+        return None
+    limits = block_speed_limits(catalog, block)
+    if limits is None:
+        return None
+    speed = limits.ravel() * (1.0 + LIMIT_TOLERANCE)
+    gap, paused = _task_gap(task, tolerance)
+    moving = (speed > 0.0) & (speed < math.inf)
+    time = np.where(moving, max(gap, 0.0) / np.where(moving, speed, 1.0), 0.0) + paused
+    value = np.zeros_like(time)
+    for name, weight in objective.terms:
+        if name == "time":
+            value = value + weight * time
+    return np.where(value <= 0.0, 0.0, value)
+
+
+def _task_gap(task: Task, tolerance: float) -> tuple[float, float]:
+    """The distance [m] the tool must cover at least, and the pauses [s], for :func:`catalog_bound`."""
+    if task.goals:
+        gap = tool_path_gap(task.start, task.start_tolerance or tolerance, task.goals, tolerance)
+        gap -= TERMINAL_TOLERANCE + GOAL_TOLERANCE * sum(g.moves for g in task.goals)
+        return gap, math.fsum(g.duration for g in task.goals)
+    gap = math.dist(task.start, task.goal) - (task.start_tolerance or tolerance) - (task.goal_tolerance or tolerance)
+    return gap - TERMINAL_TOLERANCE, 0.0
 
 
 def objective_bound(objective: Objective, time: float, design: Design | None) -> float:

@@ -19,7 +19,7 @@ import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
-from .assembly import assembly_error, count_assemblies, enumerate_assemblies, pool, product
+from .assembly import assembly_blocks, assembly_error, count_assemblies, pool, product
 from .catalog import Catalog, Grammar, Module
 from .exceptions import CatalogError, CompositionError, shorten
 
@@ -133,8 +133,9 @@ def enumerate_compositions(catalog: Catalog, dof: int | None = None) -> Iterator
 
 
 def _general_compositions(catalog: Catalog, dof: int | None) -> Iterator[Composition]:
-    for ids in enumerate_assemblies(catalog, dof):
-        yield Composition(ids, sum(catalog.general_module(i).dof for i in ids))
+    for block in assembly_blocks(catalog, dof):
+        for ids in block.assemblies():
+            yield Composition(ids, block.dof)
 
 
 def _convention_a_compositions(catalog: Catalog, wanted: range) -> Iterator[Composition]:

@@ -46,9 +46,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO
 
-from .bounds import DESIGN, IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, catalog_bound, joint_levers, objective_bound
+from .bounds import DESIGN, IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, joint_levers, objective_bound
 from .certificate import Certificate, Ledger
-from .composition import Composition, enumerate_compositions
+from .composition import Composition
 from .costs import design_of
 from .exceptions import InfeasibleError, InputError, shorten
 from .execution import Engine, make_engine, make_executor
@@ -59,6 +59,7 @@ from .feasibility import (
     check_compositions,
     composition_space,
 )
+from .frontier import bound_chunks, take_pass
 from .ocp.candidate import CandidateSpec, make_candidate
 from .ocp.solver import Iterate
 from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, track_winner, winner_approach
@@ -289,41 +290,35 @@ class _Search:
         the key ``after`` (all of them when the space is small enough). At the ``deadline`` the
         pass ends where it is: the compositions it has not bounded count as beyond the frontier
         with a bound of 0 (nothing is known of them)."""
-        keep = self.settings.frontier
-        kept: list[tuple[float, int, Composition]] = []  # a max-heap by key: (-bound, -index)
-        beyond, smallest = 0, math.inf
         self.passes += 1
         started = shown = time.perf_counter()
-        for index, composition in enumerate(enumerate_compositions(self.scenario.catalog)):
-            if index % 4096 == 0:
-                now = time.perf_counter()
-                if now >= deadline:
-                    unknown = self.space - self.passed - len(kept) - beyond
-                    beyond, smallest = beyond + unknown, 0.0
-                    break
-                if index and now - shown >= PASS_PROGRESS:
-                    shown = now
-                    left = (self.space - index) * (now - started) / index
-                    self.notify("pass", {"pass": self.passes, "bounded": index, "space": self.space, "eta": left})
-            bound = catalog_bound(composition, self.scenario.catalog, self.scenario.task, self.tolerance).value
-            key = (bound, index)
-            if after is not None and key <= after:
-                continue
-            if len(kept) < keep:
-                heapq.heappush(kept, (-bound, -index, composition))
-            elif key < (-kept[0][0], -kept[0][1]):
-                dropped = heapq.heapreplace(kept, (-bound, -index, composition))
-                beyond, smallest = beyond + 1, min(smallest, -dropped[0])
-            else:
-                beyond, smallest = beyond + 1, min(smallest, bound)
+
+        def progress(bounded: int) -> None:
+            nonlocal shown
+            now = time.perf_counter()
+            if now - shown >= PASS_PROGRESS:
+                shown = now
+                left = (self.space - bounded) * (now - started) / bounded
+                self.notify("pass", {"pass": self.passes, "bounded": bounded, "space": self.space, "eta": left})
+
+        scenario = self.scenario
+        taken = take_pass(
+            bound_chunks(scenario.catalog, scenario.task, self.tolerance),
+            self.settings.frontier,
+            after,
+            lambda: time.perf_counter() >= deadline,
+            progress,
+        )
         queue = self.queues[_UNCHECKED]
-        for negative, index, composition in kept:
-            queue.append(_Item(-negative, (-negative, -index), _UNCHECKED, composition))
+        queue.extend(_Item(bound, (bound, index), _UNCHECKED, composition) for bound, index, composition in taken.kept)
         heapq.heapify(queue)
-        self.last_key = max(((-negative, -index) for negative, index, _ in kept), default=after)
-        self.beyond = (beyond, smallest)
-        self.passed += len(kept)
-        self.unchecked += len(kept)
+        self.last_key = taken.kept[-1][:2] if taken.kept else after
+        if taken.complete:
+            self.beyond = (taken.beyond, taken.smallest)
+        else:  # nothing is known of the compositions the pass did not bound
+            self.beyond = (self.space - self.passed - len(taken.kept), 0.0)
+        self.passed += len(taken.kept)
+        self.unchecked += len(taken.kept)
 
     # -- stages 1 and 2: step B, relaxed then whole -------------------------------------------------
     def _check(self, items: list[_Item]) -> None:
