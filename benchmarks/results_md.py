@@ -283,6 +283,16 @@ def _search_lines() -> list[str]:
         "its first batch; the search stops earlier when a bound lets it.",
         "",
     ]
+    timed = doc.get("pass")
+    if timed:
+        lines += [
+            f"One pass over the {timed['space']:,} assemblies of {timed['scenario']} (every catalogue bound, "
+            f"the {timed['kept']:,} smallest kept), one core: {timed['seconds']:.1f} s, "
+            f"{timed['us_per_composition']:.2f} us an assembly by blocks; bounded one composition at a time "
+            f"(its first 200,000), {timed['one_by_one_us_per_composition']:.1f} us. Kept bounds "
+            f"{timed['smallest_bound_s']:.4f} to {timed['largest_kept_bound_s']:.4f} s.",
+            "",
+        ]
     if full:
         row = full["rows"][0]
         lines += [

@@ -125,19 +125,24 @@ class Ledger:
         self.uncertain: list[float] = []  # the same without the ratio-pruned
         self.unexplored: list[float] = []
         self.extra: Counter[str] = Counter()  # compositions counted without a name (beyond the frontier)
+        self._unexplored_named = 0  # of ``classes``, those unexplored
 
     @property
     def checked(self) -> int:
-        """Compositions with a class so far."""
-        return len(self.classes)
+        """Compositions settled so far: with a class other than unexplored."""
+        return len(self.classes) - self._unexplored_named
 
     def _set(self, composition: str, kind: str) -> None:
         old = self.classes.get(composition)
         if old is None or _RANK.get(kind, 3) < _RANK.get(old, 3):
-            self.classes[composition] = kind
+            self._put(composition, old, kind)
+
+    def _put(self, composition: str, old: str | None, kind: str) -> None:
+        self._unexplored_named += (kind == _UNEXPLORED) - (old == _UNEXPLORED)
+        self.classes[composition] = kind
 
     def removed(self, composition: str, test: str) -> None:
-        self.classes[composition] = f"removed:{test}"
+        self._put(composition, self.classes.get(composition), f"removed:{test}")
 
     def removed_many(self, test: str, count: int) -> None:
         """``count`` compositions removed by ``test``, not named (a run that counts them only)."""

@@ -208,6 +208,22 @@ def test_the_certificate_tells_a_bound_from_the_ratio_rule_and_writes_an_unbound
     assert "gap unbounded" in certificate.line()
 
 
+def test_the_ledger_counts_as_settled_only_what_has_a_class_other_than_unexplored():
+    """A budget that ends a search puts what is left in its frontier into the ledger as
+    unexplored: the progress's settled count must not grow by them (167,936 compositions were
+    once shown settled when none had been checked)."""
+    ledger = Ledger(5)
+    ledger.left("a", 0.5, "tool speed", 1.0)  # below the best cost: unexplored
+    ledger.left("b", 2.0, "tool speed", 1.0)  # excluded by its bound
+    assert ledger.checked == 1
+    ledger.candidate(CandidateResult.never_started("a").pruned(5, "ratio rule: iterate 3 is 3.00x"), 0.5)
+    ledger.removed("c", "reach")
+    assert ledger.checked == 2  # unexplored comes before ratio-pruned: "a" stays unexplored
+    ledger.left("d", 0.1, "tool speed", 1.0)
+    ledger.removed("d", "reach")  # a verdict after all
+    assert ledger.checked == 3 and ledger.certificate(None, math.inf, "budget").unexplored == 1
+
+
 def test_run_prints_the_certificate_and_refuses_a_budget_without_the_search(tmp_path):
     result = CliRunner().invoke(main, ["run", str(FAST), "--out", str(tmp_path / "a"), "--budget", "10"])
     assert result.exit_code == 2 and "add --search best-first" in result.output
