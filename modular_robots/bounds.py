@@ -261,7 +261,7 @@ def _link_ids(catalog: Catalog) -> tuple[str, ...]:
     return tuple(m.id for m in catalog.modules if catalog.general_module(m.id).kind == "link")
 
 
-@functools.lru_cache(maxsize=4096)
+@functools.lru_cache(maxsize=256)  # a pass meets few (module, gap, module) triples; each holds a float per run
 def _gap_pieces(catalog: Catalog, before: str, gap: tuple[tuple[str, ...], ...], after: str) -> np.ndarray:
     """For each run of ``gap``: the distance from the last joint's origin of module ``before``
     to the first joint's origin of ``after`` (to its outlet, the tool, for an effector without

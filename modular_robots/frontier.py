@@ -124,7 +124,7 @@ def take_pass(
     every chunk) is true, the pass ends where it is; ``progress(bounded)`` is called after every
     chunk."""
     held: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (values, indices, chunk numbers)
-    builders: dict[int, BoundChunk] = {}  # the chunks that build held compositions when needed
+    builders: dict[int, tuple[int, Callable[[int], Composition]]] = {}  # (start, build) of lazy chunks held from
     built: dict[int, Composition] = {}  # held compositions of eager chunks, by index
     held_count = 0
     limit: tuple[float, float] = (math.inf, math.inf)  # the largest key held, once ``keep`` are
@@ -166,8 +166,8 @@ def take_pass(
             held.append((values[within], indices[within], np.full(count, number)))
             if chunk.eager:
                 built.update((int(i), chunk.build(int(i) - chunk.start)) for i in indices[within])
-            else:
-                builders[number] = chunk
+            else:  # not the chunk itself: its values would be held with it
+                builders[number] = (chunk.start, chunk.build)
             held_count += count
             if held_count >= 2 * keep:
                 compact()
@@ -181,8 +181,8 @@ def take_pass(
         for value, index, number in zip(values.tolist(), indices.tolist(), numbers.tolist(), strict=True):
             composition = built.get(index)
             if composition is None:
-                chunk = builders[number]
-                composition = chunk.build(index - chunk.start)
+                start, build = builders[number]
+                composition = build(index - start)
             kept.append((value, index, composition))
     return FrontierPass(kept, above - len(kept), smallest, bounded, complete)
 

@@ -296,7 +296,7 @@ class _Search:
         def progress(bounded: int) -> None:
             nonlocal shown
             now = time.perf_counter()
-            if now - shown >= PASS_PROGRESS:
+            if bounded and now - shown >= PASS_PROGRESS:
                 shown = now
                 left = (self.space - bounded) * (now - started) / bounded
                 self.notify("pass", {"pass": self.passes, "bounded": bounded, "space": self.space, "eta": left})
