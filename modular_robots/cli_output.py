@@ -75,7 +75,8 @@ def run_table(result, scenario, search: dict | None = None) -> str:
             f"{len(statuses)} optimised ({result.feasibility.feasible} compositions, "
             f"{sum(c.boundary_pair == BoundaryPair.CLEAR for c in result.candidates)} also from a clear pair): "
             f"{statuses.count('optimal')} optimal, "
-            f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed",
+            f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed"
+            + (f", {stopped} stopped before their end" if (stopped := statuses.count("stopped")) else ""),
         ),
         ("optimizer iterations", f"{result.iterations} in {result.rounds} lockstep rounds"),
         *([("certificate", result.certificate.line())] if result.certificate is not None else []),

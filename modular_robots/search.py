@@ -51,7 +51,7 @@ from .certificate import Certificate, Ledger
 from .composition import Composition
 from .costs import design_of
 from .exceptions import InfeasibleError, InputError, shorten
-from .execution import Engine, make_engine, make_executor
+from .execution import Engine, make_engine, make_executor, single_threaded_blas
 from .feasibility import (
     FeasibilitySettings,
     FeasibilitySummary,
@@ -538,8 +538,9 @@ def _check_chunk(context, chunk: list[tuple[int, Composition]]) -> list[Verdict]
 def _solve(scenario: Scenario, spec: CandidateSpec, expected: CandidateResult) -> CandidateResult:
     """``spec``'s candidate solved again in this process: the plan of a winner found before a stop."""
     candidate = make_candidate(scenario, spec)
-    for _ in candidate.iterate():
-        pass
+    with single_threaded_blas():  # as on the worker that solved it: BLAS threads round differently
+        for _ in candidate.iterate():
+            pass
     result = candidate.result
     assert result is not None
     if result.status != CandidateStatus.OPTIMAL or not math.isclose(result.cost, expected.cost, rel_tol=1e-9):

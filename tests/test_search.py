@@ -16,14 +16,18 @@ import random
 
 import pytest
 from click.testing import CliRunner
+from threadpoolctl import threadpool_info, threadpool_limits
 
 import modular_robots.search as search_module
 from modular_robots import frontier as frontier_module
 from modular_robots import load_scenario
 from modular_robots.certificate import Ledger
 from modular_robots.cli import main
+from modular_robots.cli_output import run_table
+from modular_robots.composition import Composition
 from modular_robots.exceptions import InfeasibleError, InputError
-from modular_robots.pipeline import run_scenario
+from modular_robots.feasibility import check_composition
+from modular_robots.pipeline import candidate_specs, run_scenario
 from modular_robots.plan.candidate import CandidateResult
 from modular_robots.pruning import bound_rule
 from modular_robots.search import STATE, SearchSettings, search_scenario
@@ -164,6 +168,8 @@ def test_a_budget_stops_step_c_mid_batch_and_a_second_run_replays_what_ended(
         if stopped:  # a search that ended before its budget has none
             assert certificate["ended"] == "budget" and certificate["unexplored"] >= len(stopped)
             cut_mid_batch += cut is not None
+            if cut is not None:  # the summary counts them
+                assert f"{len(stopped)} stopped before their end" in run_table(cut, scenario)
         records = [json.loads(line) for line in (out / STATE).read_text().splitlines()[1:]]
         ended_before = [r["result"]["name"] for r in records if "result" in r]
         assert all(r["result"]["status"] != "stopped" for r in records if "result" in r)
@@ -260,3 +266,36 @@ def test_a_pass_over_a_large_space_reports_its_progress(monkeypatch, tmp_path):
     assert all(f["eta"] > 60.0 for f in seen)
     document = json.loads((tmp_path / "out" / "result.json").read_text())
     assert document["search"]["certificate"]["ended"] == "budget"
+
+
+def test_a_winner_solved_again_after_a_stop_solves_as_its_worker_did_with_one_blas_thread(
+    scenario, uninterrupted, monkeypatch
+):
+    """A winner found before a stop is solved again in the main process for its plan. Its
+    worker solved it with one BLAS thread; two round differently, and on Science2019's larger
+    problems such a second solve ended 1.5e-5 s off the record, and the run refused to go on."""
+    expected, _, _ = uninterrupted
+    winner = next(c for c in expected.candidates if c.name == expected.winner.name)
+    composition = Composition.from_name(winner.composition, scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    spec = next(s for s in candidate_specs([verdict]) if s.name == winner.name)
+    threads: list[int] = []
+    make = search_module.make_candidate
+
+    def watched(scenario, spec):
+        candidate = make(scenario, spec)
+        iterate = candidate.iterate
+
+        def counted():
+            for it in iterate():
+                threads.extend(pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas")
+                yield it
+
+        candidate.iterate = counted
+        return candidate
+
+    monkeypatch.setattr(search_module, "make_candidate", watched)
+    with threadpool_limits(limits=2):  # a main process whose BLAS may use two threads
+        again = search_module._solve(scenario, spec, winner)
+    assert threads and set(threads) == {1}
+    assert again.cost == winner.cost and again.iterations == winner.iterations
