@@ -465,6 +465,8 @@ class _Search:
                 recorder.finish("failed", message + certificate.line())
             else:
                 message = "no composition verified; "
+                if not self.summary.feasible:  # why step B removed them all, as the exhaustive run says
+                    message = f"{self.summary.diagnosis()}\n{message}"
                 recorder.finish("infeasible" if not results else "failed", message + certificate.line())
             raise InfeasibleError(message + certificate.line())
         winner = self._winner()

@@ -299,3 +299,20 @@ def test_a_winner_solved_again_after_a_stop_solves_as_its_worker_did_with_one_bl
         again = search_module._solve(scenario, spec, winner)
     assert threads and set(threads) == {1}
     assert again.cost == winner.cost and again.iterations == winner.iterations
+
+
+def test_a_search_that_step_b_empties_says_which_test_removed_them_as_the_exhaustive_run_does(tmp_path):
+    text = FAST.read_text().replace("goal: [-0.5, 0.9, 0.9]", "goal: [9.0, 9.0, 9.0]")
+    text = text.replace("../../scenarios/", str(ROOT / "scenarios") + "/")
+    (tmp_path / "far.yaml").write_text(text)
+    scenario = load_scenario(tmp_path / "far.yaml")
+    with pytest.raises(InfeasibleError) as searched:
+        search_scenario(scenario, tmp_path / "search", jobs=1)
+    with pytest.raises(InfeasibleError) as exhaustive:
+        run_scenario(scenario, tmp_path / "run", jobs=1)
+    why = str(exhaustive.value).splitlines()
+    assert why[0].endswith("removed by the reach test") and "15.588 m from the base" in why[1]
+    assert str(searched.value).splitlines()[:2] == why[:2]
+    assert "516 removed by step B" in str(searched.value)
+    document = json.loads((tmp_path / "search" / "result.json").read_text())
+    assert document["status"] == "infeasible" and document["message"].startswith(why[0])
