@@ -220,6 +220,8 @@ class Fields:
         self._prefix = prefix
         self._error = error
         self._read: set[str] = set()
+        #: Keys asked about with :meth:`has` (optional keys: named in an unknown key's hint).
+        self._asked: set[str] = set()
 
     def reporting(self, error: type[InputError]) -> Fields:
         """The same mapping, reporting its errors as ``error`` (once the file's kind is known)."""
@@ -250,6 +252,7 @@ class Fields:
 
     # -- typed getters ---------------------------------------------------------------------
     def has(self, key: str) -> bool:
+        self._asked.add(key)
         return key in self._data
 
     def names(self) -> list[str]:
@@ -425,7 +428,7 @@ class Fields:
                     f"{self.path}:{line}: {self.key_path()}: expected keys that are names, got {_kind(key)} as a key"
                 )
             if key not in self._read:
-                expected = ", ".join(sorted(str(k) for k in self._read))
+                expected = ", ".join(sorted(str(k) for k in self._read | self._asked))
                 raise self.fail(key, f"unknown key (expected one of: {expected})")
 
     def check(self, key: str, ok: bool, message: str) -> None:

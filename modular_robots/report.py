@@ -9,6 +9,7 @@ Every file is written to a temporary name and renamed into place
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from collections.abc import Sequence
@@ -182,6 +183,14 @@ def read_winner(folder: str | Path) -> tuple[ResultDocument, str, Trajectory]:
         raise InputError(f"{folder}: cannot read the winner's files ({shorten(exc, 120, quote=False)})") from None
     except ValueError as exc:
         raise InputError(str(exc)) from None
+    winner = document.winner
+    assert winner is not None  # required above
+    end = float(trajectory.t[-1])
+    if not math.isclose(end, winner.tf, rel_tol=1e-9, abs_tol=1e-12):
+        raise InputError(
+            f"{trajectory_path}: the plan ends at t = {end:.6g} s, but {folder / RESULT} says tf = "
+            f"{winner.tf:.6g} s; expected the winner's plan to its end (a cut or edited file?)"
+        )
     return document, urdf, trajectory
 
 

@@ -371,6 +371,7 @@ def _read_goals(f: Fields, start: tuple[float, float, float]) -> tuple[Goal, ...
     goals: list[Goal] = []
     previous: tuple[float, ...] = start
     poses: dict[str, tuple[float, ...]] = {START: start}
+    at = START  # the goal whose configuration the robot is at
     items = list(f.mappings("goals"))
     f.check("goals", bool(items), "expected at least one goal")
     for number, item in enumerate(items, start=1):
@@ -396,12 +397,19 @@ def _read_goals(f: Fields, start: tuple[float, float, float]) -> tuple[Goal, ...
                 f"no earlier goal with id {shorten(to)} to return to; expected start or one of "
                 f"{', '.join(k for k in poses if k != START) or 'none (no goal before it)'}",
             )
+            item.check(  # (a pose that differs only in orientation, or another IK branch, is a move)
+                "return",
+                to != at,
+                f"the robot is at {'the start' if to == START else f'goal {shorten(to)}'}'s configuration "
+                "already; expected a goal to return to that it has left",
+            )
             goals.append(Goal("return", id_, to=to))
             position = poses[to]
         else:
             position, orientation, tolerance = _read_end(item, kind)
             goals.append(Goal(kind, id_, position, orientation, tolerance))
         if kind != "pause":
+            at = to if kind == "return" else id_  # whose configuration the robot is at after it
             item.check(
                 kind,
                 kind == "return" or math.dist(previous, position) >= MIN_TRAVEL * (1.0 - 1e-9),

@@ -115,6 +115,13 @@ def test_the_last_goal_is_at_rest_and_pauses_add_up():
         ("    - reach: [0.45, 0.25, 0.2502]", "goals[0].reach", "from the one before"),
         ("    - reach: [0.1, 0.5, 0.4]\n    - pause: 0", "goals[1].pause", "expected a number > 0"),
         ("    - pause: 0.3", "goals", "at least one goal that moves"),
+        ("    - return: start", "goals[0].return", "the robot is at the start's configuration already"),
+        ("    - reach: [0.1, 0.5, 0.4]\n    - pause: 1\n    - return: 1", "goals[2].return", "at goal '1'"),
+        (
+            "    - reach: [0.1, 0.5, 0.4]\n    - return: start\n    - pause: 1\n    - return: start",
+            "goals[3].return",
+            "at the start's configuration already; expected a goal to return to that it has left",
+        ),
         ("    - reach: [0.1, 0.5, 0.4]\n      at: [0.2, 0.5, 0.4]", "goals[0]", "expected exactly one of"),
     ],
 )

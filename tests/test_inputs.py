@@ -289,7 +289,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
             "  cost: time",
             "  cost: time\n  speed: 3",
             "speed:",
-            "task.speed: unknown key (expected one of: cost, floor, goal, max_time, obstacles, payload, self_collision, start)",
+            "task.speed: unknown key (expected one of: cost, floor, goal, goals, max_time, obstacles, payload, self_collision, start)",
         ),
         (
             "  cost: time",

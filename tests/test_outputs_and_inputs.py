@@ -252,3 +252,28 @@ def test_export_refuses_to_replace_the_plan_it_reads(finished, tmp_path, how):
         f"Error: .: {read}, and that is trajectory_100hz.csv, which this export writes; expected the run's own files "
         "(export at another rate, or run again)"
     )
+
+
+@pytest.mark.parametrize("edit", ["rows cut", "tf changed"])
+def test_export_and_view_refuse_a_plan_that_does_not_end_at_the_winners_tf(finished, tmp_path, edit):
+    """A trajectory.csv cut after a few rows is still a valid plan row to row (each row follows from
+    the one before), and so is a result.json whose tf was edited: only the two together tell that
+    the robot would stop short of the goal."""
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    tf = json.loads((folder / "result.json").read_text())["winner"]["tf"]
+    if edit == "rows cut":
+        lines = (folder / "trajectory.csv").read_text().splitlines()
+        (folder / "trajectory.csv").write_text("\n".join(lines[:5]) + "\n")
+        end, said = float(lines[4].split(",")[0]), tf
+    else:
+        document = json.loads((folder / "result.json").read_text())
+        document["winner"]["tf"] = said = 5.0
+        (folder / "result.json").write_text(json.dumps(document))
+        end = tf
+    for command in (["export", ".", "--rate", "100"], ["view", "."]):
+        assert _refused(folder, command) == (
+            f"Error: trajectory.csv: the plan ends at t = {end:.6g} s, but result.json says tf = {said:.6g} s; "
+            "expected the winner's plan to its end (a cut or edited file?)"
+        )
+    assert not list(folder.glob("trajectory_100hz.*"))

@@ -453,3 +453,13 @@ def test_a_general_joint_limit_beyond_100_is_refused_with_the_bound(tmp_path):
         CatalogError, match=r"limits\.position: expected limits within \+-100 \(rad or m\), got \[-200, 200\]"
     ):
         load_catalog(path)
+
+
+def test_a_misspelt_key_of_an_overrides_file_is_refused_with_every_key_it_may_have(tmp_path):
+    overrides = tmp_path / "bad.overrides.yaml"
+    overrides.write_text("nmae: x\n")
+    with pytest.raises(CatalogError) as error:
+        import_timor(IMPROV_JSON, overrides)
+    assert str(error.value) == (
+        f"{overrides}:1: nmae: unknown key (expected one of: description, grammar, name, notes, overrides, remove)"
+    )
