@@ -225,8 +225,8 @@ def import_cobra_command(
     """Convert a CoBRA task (JSON) to a scenario YAML for a catalogue."""
     distinct_files([("-o", output)], [("TASK_JSON", task_json), ("--catalog", catalog)])
     imported = import_cobra(task_json, catalog, output, cost, payload, max_time)
-    imported.write(output)
-    scenario = load_scenario(output)  # what was written reads back (every check of the reader)
+    scenario = imported.write(output, load_scenario)  # it reads back (every check of the reader), or is taken back
+    assert scenario is not None
     goals = len(scenario.task.goals) + 1
     click.echo(
         f"wrote {output} ({goals} goals, {len(scenario.task.obstacles)} obstacles, {len(imported.meshes)} meshes)"

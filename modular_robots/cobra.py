@@ -29,14 +29,17 @@ and the goals' ids.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import json
 import math
 import os
 import re
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import yaml
@@ -66,6 +69,9 @@ _POSITION = ("r_sph", "x", "y", "z")
 GRAVITY = (0.0, 0.0, -9.81)
 
 
+_T = TypeVar("_T")
+
+
 @dataclass(frozen=True)
 class CobraImport:
     """A converted task: the scenario's ``text`` and the mesh files to copy (``meshes``: the
@@ -74,15 +80,39 @@ class CobraImport:
     text: str
     meshes: dict[str, Path]
 
-    def write(self, path: str | Path) -> None:
-        """Write the scenario to ``path`` and its meshes beside it."""
+    def write(self, path: str | Path, check: Callable[[Path], _T] | None = None) -> _T | None:
+        """Write the scenario to ``path`` and its meshes beside it, and return ``check(path)``
+        (e.g. :func:`~modular_robots.scenario.load_scenario`). If writing or ``check`` raises,
+        what was written is taken back (a file it replaced gets its old content, a folder it made
+        goes) before the error goes on: a refused import leaves the folder as it was."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        for name, source in self.meshes.items():
-            target = path.parent / name
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(source, target)
-        path.write_text(self.text, encoding="utf-8")
+        before: dict[Path, bytes | None] = {}
+        made: set[Path] = set()
+
+        def folder(of: Path) -> None:
+            made.update(p for p in (of, *of.parents) if not p.exists())
+            of.mkdir(parents=True, exist_ok=True)
+
+        def put(target: Path, write: Callable[[Path], object]) -> None:
+            before.setdefault(target, target.read_bytes() if target.is_file() else None)
+            write(target)
+
+        try:
+            folder(path.parent)
+            for name, source in self.meshes.items():
+                target = path.parent / name
+                folder(target.parent)
+                put(target, functools.partial(shutil.copyfile, source))
+            put(path, lambda target: target.write_text(self.text, encoding="utf-8"))
+            return check(path) if check is not None else None
+        except BaseException:
+            for target, old in before.items():
+                with contextlib.suppress(OSError):
+                    target.unlink(missing_ok=True) if old is None else target.write_bytes(old)
+            for made_folder in sorted(made, key=lambda p: len(p.parts), reverse=True):
+                with contextlib.suppress(OSError):
+                    made_folder.rmdir()
+            raise
 
 
 def cobra_terms(descriptor: str) -> list[tuple[str, float]]:

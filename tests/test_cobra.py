@@ -375,3 +375,19 @@ def test_the_check_fails_a_solution_that_breaks_a_goal(solved):
     early["trajectory"]["goal2time"]["place"] = float(t[int(np.flatnonzero(np.isclose(t, times["place"]))[0]) - 20])
     with pytest.raises(AssertionError, match="place"):
         check_solution(task, early, result.urdf, result.drive["armature"])
+
+
+def test_a_refused_import_leaves_the_folder_as_it_was(tmp_path):
+    """The reader refuses the written scenario (energy alone needs --max-time): nothing of it stays,
+    neither in a new folder nor over an earlier import, whose scenario and mesh are kept."""
+    task = ["import-cobra", str(TASKS / "PTP_pause.json"), "--catalog", str(IMPROV_6DOF)]
+    fresh = tmp_path / "new" / "cell" / "pause.yaml"
+    refused = CliRunner().invoke(main, [*task, "-o", str(fresh), "--cost", "mechEnergy"])
+    assert refused.exit_code == 1 and "task.cost: energy" in refused.output, refused.output
+    assert not (tmp_path / "new").exists()
+    kept = tmp_path / "kept" / "pause.yaml"
+    assert CliRunner().invoke(main, [*task, "-o", str(kept)]).exit_code == 0
+    files = {p: p.read_bytes() for p in kept.parent.rglob("*") if p.is_file()}
+    refused = CliRunner().invoke(main, [*task, "-o", str(kept), "--cost", "mechEnergy"])
+    assert refused.exit_code == 1 and "task.cost: energy" in refused.output, refused.output
+    assert {p: p.read_bytes() for p in kept.parent.rglob("*") if p.is_file()} == files
