@@ -379,6 +379,9 @@ def optimize_command(
     with LiveLine() as live:
 
         def progress(name, it):
+            if it.warm_up:
+                live.show(f"{name}: iteration {it.iteration}  solving the moves one at a time (bound {it.cost:.4g})")
+                return
             live.show(
                 f"{name}: iteration {it.iteration}  {scenario.task.cost} {it.cost:.4g}  "
                 f"tf {it.tf:.3f} s  violation {it.constraint_violation:.1e}"

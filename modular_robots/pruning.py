@@ -302,9 +302,10 @@ class PruningManager:
                         own = self.last[name].iteration if name in self.last else 0
                         self.results[name] = result.pruned(own, reasons[name])
                     alive[:] = [n for n in alive if n not in reasons]
+                whole = [n for n in alive if n in self.last and not self.last[n].warm_up]
                 best = reference_cost(
-                    {n: self.last[n].cost for n in alive if n in self.last},
-                    {n: self.last[n].constraint_violation for n in alive if n in self.last},
+                    {n: self.last[n].cost for n in whole},
+                    {n: self.last[n].constraint_violation for n in whole},
                     converged,
                     self.guard_violation,
                 )
@@ -376,8 +377,9 @@ class PruningManager:
             return {}
         # A candidate re-solving with refined sub-steps starts from an optimum that failed
         # verification; its cost jumps while the new sub-step constraints are restored, so it is
-        # judged on that optimum and is no reference.
-        live = [n for n in alive if n in self.last and self.last[n].refinement == 0]
+        # judged on that optimum and is no reference. One solving its moves alone (``warm_up``)
+        # has no cost of its own yet: only its bound can prune it.
+        live = [n for n in alive if n in self.last and self.last[n].refinement == 0 and not self.last[n].warm_up]
         costs = {n: self.last[n].cost for n in live}
         violations = {n: self.last[n].constraint_violation for n in live}
         if rule == "paper":
@@ -400,6 +402,7 @@ class PruningManager:
         if previous is not None and iterate.refinement > previous.refinement:
             self.floor[name] = previous.cost
         self.last[name] = iterate
-        ok = iterate.constraint_violation <= self.guard_violation
+        ok = iterate.constraint_violation <= self.guard_violation and not iterate.warm_up
         self.trusted.setdefault(name, deque(maxlen=self.settings.window + 1)).append(iterate.cost if ok else None)
-        self.untrusted_for[name] = 0 if ok else self.untrusted_for.get(name, 0) + 1
+        if not iterate.warm_up:  # (patience counts the whole motion's iterates)
+            self.untrusted_for[name] = 0 if ok else self.untrusted_for.get(name, 0) + 1

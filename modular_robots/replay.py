@@ -25,7 +25,7 @@ __all__ = ["ReplayingExecutor", "trace_json", "trace_from_json"]
 
 _EMPTY = np.zeros(0)
 #: The fields of an iterate that step D reads (:class:`~modular_robots.pruning.PruningManager`).
-_FIELDS = ("iteration", "cost", "constraint_violation", "tf", "refinement", "cost_bound")
+_FIELDS = ("iteration", "cost", "constraint_violation", "tf", "refinement", "cost_bound", "warm_up")
 
 
 def trace_json(trace: Sequence[Iterate]) -> list[list[float]]:
@@ -35,7 +35,7 @@ def trace_json(trace: Sequence[Iterate]) -> list[list[float]]:
 
 def trace_from_json(rows: Sequence[Sequence[float]]) -> list[Iterate]:
     """The iterates of :func:`trace_json`'s rows (without the decision vector, which step D does
-    not read)."""
+    not read; a row without ``warm_up``, written before it existed, is not one)."""
     return [
         Iterate(
             iteration=int(row[0]),
@@ -45,6 +45,7 @@ def trace_from_json(rows: Sequence[Sequence[float]]) -> list[Iterate]:
             y=_EMPTY,
             refinement=int(row[4]),
             cost_bound=row[5],
+            warm_up=len(row) > 6 and bool(row[6]),
         )
         for row in rows
     ]

@@ -446,6 +446,11 @@ def test_the_moves_solved_first_are_yielded_at_the_motions_bound_and_can_be_stop
     iterates = candidate.iterate()
     first = [next(iterates) for _ in range(3)]
     assert [it.iteration for it in first] == [1, 2, 3]
-    assert all(it.cost == bound == it.cost_bound for it in first) and bound > 0.0
+    assert all(it.cost == bound == it.cost_bound and it.warm_up for it in first) and bound > 0.0
     candidate.close()
-    assert candidate.result is not None and candidate.result.status == "stopped" and candidate.result.stop_times == ()
+    result = candidate.result
+    assert result is not None and result.status == "stopped" and result.stop_times == ()
+    assert "while solving its moves one at a time" in result.reason
+    # no cost of the motion yet, and the motion's ends and bound (not the first move's)
+    assert math.isnan(result.cost) and math.isnan(result.tf) and result.cost_bound == bound
+    assert result.q_start == verdict.q_start and result.q_goal == verdict.q_goal

@@ -61,7 +61,8 @@ class Script:
     default); when the script runs out it ends with status ``end`` and cost ``final_cost``
     (default: the last iterate's cost). Iterates from index ``refine_from`` on belong to a
     re-solve with refined sub-steps (``refinement`` 1). ``bound`` is the problem's lower bound on
-    the cost, carried by every iterate."""
+    the cost, carried by every iterate. The first ``warm_up`` iterates are a multi-goal
+    candidate's moves solved alone (:attr:`~modular_robots.ocp.solver.Iterate.warm_up`)."""
 
     name: str
     costs: tuple[float, ...]
@@ -70,6 +71,7 @@ class Script:
     final_cost: float | None = None
     refine_from: int | None = None
     bound: float = 0.0
+    warm_up: int = 0
 
     def violation(self, i: int) -> float:
         return 0.0 if self.violations is None else self.violations[i]
@@ -105,6 +107,7 @@ class FakeCandidate:
                 np.array([cost, self.script.violation(i)]),
                 refinement=int(refining),
                 cost_bound=self.script.bound,
+                warm_up=i < self.script.warm_up,
             )
             self.history.append(float(cost))
             yield self.last
@@ -595,6 +598,31 @@ def test_the_defaults_keep_a_slow_winner_that_the_trusted_reference_prunes():
     assert "ratio rule: trusted cost 5 is 2.50x the reference 2" in new["hopeless"].reason
     assert new["beyond"].status == "pruned" and new["beyond"].pruned_at_iteration == 4
     assert "by the bound: no plan of it costs less than 2.1, above the best verified cost 2" in new["beyond"].reason
+
+
+def test_a_candidate_solving_its_moves_alone_is_no_reference_and_not_judged_on_them():
+    """A multi-goal candidate's first iterates are its moves solved alone, reported at the whole
+    motion's bound with the move's (tiny) violation. They once made the best trusted cost: on
+    improv-pick-pause with ``reference: trusted``, 13 of 14 candidates were pruned against such a
+    bound and a robot 22 % slower than the exhaustive winner won. Now only the bound of such a
+    candidate counts; its warm-up neither is trusted nor counts towards patience."""
+    moves = Script("moves", (0.9,) * 5 + (3.0, 2.5, 2.2, 2.1), end="optimal", final_cost=2.1, bound=0.9, warm_up=5)
+    other = Script("other", (2.4, 2.3, 2.2, 2.2, 2.2, 2.2, 2.2, 2.2, 2.2), end="optimal", final_cost=2.2, bound=1.0)
+    results, progress = run_fakes([moves, other], "ratio")
+    assert results["other"].status == results["moves"].status == "optimal"
+    assert [p.best_cost for p in progress[:5]] == [2.4, 2.3, 2.2, 2.2, 2.2]  # never the bound 0.9
+    # the same scripts without the warm-up flag: "other" pruned against the bound 0.9
+    unflagged, _ = run_fakes([replace(moves, warm_up=0), other], "ratio")
+    assert unflagged["other"].status == "pruned" and "reference 0.9" in unflagged["other"].reason
+    # patience counts only the whole motion's untrusted iterates
+    slow = Script("slow", (0.9,) * 5 + (3.0,) * 3, (0.0,) * 5 + (1.0,) * 3, end="optimal", bound=0.9, warm_up=5)
+    kept, _ = run_fakes([slow, other], "ratio", patience=4)
+    assert kept["slow"].status == "optimal"
+    # ... and its bound alone can still prune it, above the verified reference
+    hopeless = Script("hopeless", (4.0,) * 6, end="optimal", bound=4.0, warm_up=6)
+    quick = Script("quick", (2.0,), end="optimal", final_cost=2.0, bound=1.0)
+    bounded, _ = run_fakes([quick, hopeless], "ratio", reference="verified")
+    assert bounded["hopeless"].status == "pruned" and "costs less than 4" in bounded["hopeless"].reason
 
 
 def test_admission_by_bound_drops_a_candidate_before_its_first_iteration():

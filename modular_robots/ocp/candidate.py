@@ -153,7 +153,8 @@ class Candidate:
         if self._generator is not None:
             self._generator.close()
         if self.result is None:
-            self._finish(CandidateStatus.STOPPED, "closed before convergence" + self._note, None)
+            moves = " (while solving its moves one at a time)" if self.last is not None and self.last.warm_up else ""
+            self._finish(CandidateStatus.STOPPED, "closed before convergence" + moves + self._note, None)
 
     def _solve(
         self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int
@@ -266,8 +267,9 @@ class Candidate:
 
         The moves' iterates are yielded (so that a budget, a stop or step D's lockstep are not held
         up by them), each with the whole motion's lower bound for its cost (the problem's
-        ``cost_bound``): a move's own cost is not the motion's, and step D takes a bound for no
-        more than what it is. Returns the first point and the iterations so far."""
+        ``cost_bound``) and marked ``warm_up``: a move's own cost and violation are not the
+        motion's, so step D prunes on them by the bound only, and a candidate stopped among them
+        records no cost. Returns the first point and the iterations so far."""
         full, offset = self.problem, 0
         if full.phases == 1:
             return None, offset
@@ -279,11 +281,10 @@ class Candidate:
                 nodes.append(np.tile(np.concatenate([a, np.zeros(full.nv)]), (full.phase_intervals, 1)))
                 controls.append(np.zeros((full.phase_intervals, full.nv)))
                 continue
-            self.problem = phase  # (a result taken meanwhile unpacks the move's iterate)
             solver = make_solver(phase.settings.solver, phase, None, jacobian=self.jacobian, iteration_offset=offset)
             try:
                 for it in solver.iterate():
-                    it = replace(it, cost=full.cost_bound, tf=full.time_bound, cost_bound=full.cost_bound)
+                    it = replace(it, cost=full.cost_bound, tf=full.time_bound, cost_bound=full.cost_bound, warm_up=True)
                     self.last = it
                     self.history.append(it.cost)
                     self.violations.append(it.constraint_violation)
@@ -292,7 +293,6 @@ class Candidate:
             finally:
                 solver.close()
                 self._seconds += solver.outcome.seconds if solver.outcome else 0.0
-            self.problem = full
             offset = self.last.iteration if self.last is not None else offset
             final = solver.outcome.final if solver.outcome else None
             if final is None or final.constraint_violation > phase.settings.constraint_tolerance:
@@ -321,6 +321,8 @@ class Candidate:
 
     def _finish(self, status: CandidateStatus, reason: str, verification: Verification | None):
         last, problem = self.last, self.problem
+        # (a move's iterate has no cost of the motion; trust-constr's iterates may leave tf's bounds)
+        whole = last is not None and not last.warm_up
         optimal = status == CandidateStatus.OPTIMAL
         ends = (problem.q_start, problem.q_goal)  # where the plan starts and ends
         if problem.free_ends is not None and last is not None and len(last.y) == problem.n_variables:
@@ -337,9 +339,9 @@ class Candidate:
             reason=reason,
             iterations=last.iteration if last else 0,
             seconds=self._seconds,
-            cost=last.cost if last else np.nan,
-            tf=last.tf if last and last.tf >= 0.0 else np.nan,  # trust-constr's iterates may leave tf's bounds
-            constraint_violation=last.constraint_violation if last else np.nan,
+            cost=last.cost if last and whole else np.nan,
+            tf=last.tf if last and whole and last.tf >= 0.0 else np.nan,
+            constraint_violation=last.constraint_violation if last and whole else np.nan,
             cost_history=tuple(self.history),
             violation_history=tuple(self.violations),
             refinement_history=tuple(self.refinements),

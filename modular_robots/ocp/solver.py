@@ -69,6 +69,10 @@ class Iterate:
     ``effort``), ``tf`` [s], ``constraint_violation`` the largest scaled violation (trust-constr's
     measure), ``y`` the scaled decision vector, ``cost_bound`` the problem's lower bound on its
     cost (:attr:`~modular_robots.ocp.shooting.ShootingProblem.cost_bound`).
+
+    ``warm_up`` marks an iterate of a move solved alone before the whole motion (a task of several
+    goals): its ``cost`` is then the whole motion's bound and its violation the move's, so it is
+    not a point of the candidate's problem, and step D neither trusts nor judges it.
     """
 
     iteration: int
@@ -80,6 +84,7 @@ class Iterate:
     #: How many times the sub-steps had been refined (0: the first solve).
     refinement: int = 0
     cost_bound: float = 0.0
+    warm_up: bool = False
 
 
 @dataclass(frozen=True)
