@@ -65,7 +65,7 @@ from .ocp.solver import Iterate
 from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, track_winner, winner_approach
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
-from .plan.document import status_counts
+from .plan.document import stage_counts, status_counts
 from .plan.verification import LIMIT_TOLERANCE
 from .pruning import PruningManager
 from .recorder import RunRecorder
@@ -216,31 +216,46 @@ class _Search:
             self.log,
         ):
             self.recorder = recorder
-            self._take_pass(None, deadline)
-            ended = "certified"
-            while True:
-                self.seconds["search"] = time.perf_counter() - start
-                self._record()
-                lowest = self._lowest()
-                if self.cut:  # candidates stopped at the budget are still open
-                    ended = "budget"
-                    break
-                if lowest is None:
-                    ended = "exhausted"
-                    break
-                if lowest >= self._limit():
-                    break
-                if time.perf_counter() >= deadline:
-                    ended = "budget"
-                    break
-                if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._limit():
-                    self._take_pass(self.last_key, deadline)
-                    continue
-                self._step(deadline)
+            try:
+                ended = self._loop(start, deadline)
+            except BaseException:  # Ctrl-C, SIGTERM, an error: result.json lists what has ended
+                self._keep_results()
+                raise
             certificate = self._certificate(ended)
             self.certificate = certificate.to_json()
             self._record()
             return self._finish(recorder, certificate, start)
+
+    def _loop(self, start: float, deadline: float) -> str:
+        """Step B and step C until the search ends; returns how (:class:`~modular_robots.certificate.Certificate`'s
+        ``ended``)."""
+        self._take_pass(None, deadline)
+        while True:
+            self.seconds["search"] = time.perf_counter() - start
+            self._record()
+            lowest = self._lowest()
+            if self.cut:  # candidates stopped at the budget are still open
+                return "budget"
+            if lowest is None:
+                return "exhausted"
+            if lowest >= self._limit():
+                return "certified"
+            if time.perf_counter() >= deadline:
+                return "budget"
+            if not self.queues[_UNCHECKED] and self.beyond[0] and self.beyond[1] < self._limit():
+                self._take_pass(self.last_key, deadline)
+                continue
+            self._step(deadline)
+
+    def _keep_results(self) -> None:
+        """Give the recorder every candidate result so far and the counts, without writing."""
+        results = self._ranked()
+        self.recorder.update(results=results, counts=self._counts(results), every=math.inf)
+
+    def _counts(self, results: list[CandidateResult]) -> dict:
+        """``result.json``'s ``counts``: step B's over the compositions it decided, then step C's."""
+        clear = sum(r.name.endswith(f"+{BoundaryPair.CLEAR}") for r in results)
+        return {**self.summary.counts(), **stage_counts(len(results) - clear, len(results)), **status_counts(results)}
 
     def _best_cost(self) -> float:
         """The smallest verified cost so far (inf: none)."""
@@ -403,7 +418,8 @@ class _Search:
                 for name in ended:
                     if name not in written:
                         written.add(name)
-                        self.log.write_result(_labelled(manager.results[name], self.specs[name]), executor.traces[name])
+                        self.results[name] = _labelled(manager.results[name], self.specs[name])
+                        self.log.write_result(self.results[name], executor.traces[name])
 
             cut = False
             try:
@@ -458,7 +474,7 @@ class _Search:
 
     def _finish(self, recorder: RunRecorder, certificate: Certificate, start: float) -> SearchResult:
         results = self._ranked()
-        recorder.update(results=results, counts=status_counts(results))
+        recorder.update(results=results, counts=self._counts(results))
         if self.best is None:
             if certificate.ended == "budget":
                 message = "no composition verified within the budget (run again into this folder to go on); "
@@ -526,6 +542,8 @@ class _Search:
             "first_estimate": self.first_estimate,
             "certificate": self.certificate,
         }
+        if self.recorder.due(every):
+            self._keep_results()
         self.recorder.update(search=block, seconds=self.seconds, every=every)
         self.notify("search", figures)
 

@@ -109,9 +109,45 @@ def test_a_search_stopped_anywhere_ends_as_an_uninterrupted_one_when_run_again(s
         out = tmp_path / f"trial-{trial}"
         with pytest.raises(_Stop):
             search_scenario(scenario, out, jobs=1, on_progress=_stop_at(moment))
-        assert json.loads((out / "result.json").read_text())["status"] == "interrupted"
+        document = json.loads((out / "result.json").read_text())
+        assert document["status"] == "interrupted"
+        # result.json lists every candidate that had ended, as search.jsonl records them
+        assert {c["candidate"] for c in document["candidates"]} == _recorded(out), moment
+        assert document["counts"]["candidates"] == len(document["candidates"])
         again = search_scenario(scenario, out, jobs=1 + trial % 2)
         assert _answers(again) == _answers(expected), moment
+
+
+def _recorded(out) -> set[str]:
+    """The candidates whose end ``search.jsonl`` in ``out`` records."""
+    records = [json.loads(line) for line in (out / STATE).read_text().splitlines()[1:]]
+    return {r["result"]["name"] for r in records if "result" in r}
+
+
+def test_a_search_stopped_again_while_it_goes_on_keeps_what_had_ended(scenario, uninterrupted, tmp_path):
+    """A search interrupted, run again and interrupted once more after it has replayed its
+    record: result.json still lists the candidates that had ended (it listed none, and the
+    counts lacked step B's and step C's figures)."""
+    expected, _, calls = uninterrupted
+    out = tmp_path / "out"
+    with pytest.raises(_Stop):
+        search_scenario(scenario, out, jobs=1, on_progress=_stop_at(calls - 1))
+    before = _recorded(out)
+    assert before
+
+    def replayed(stage, figures):
+        if figures["candidates"] >= len(before):
+            raise _Stop
+
+    with pytest.raises(_Stop):
+        search_scenario(scenario, out, jobs=1, on_progress=replayed)
+    document = json.loads((out / "result.json").read_text())
+    assert document["status"] == "interrupted"
+    assert before <= {c["candidate"] for c in document["candidates"]} == _recorded(out)
+    counts = document["counts"]
+    assert counts["candidates"] == len(document["candidates"]) and counts["enumerated"] >= counts["feasible"] > 0
+    assert counts["optimized"] == len({c["composition"] for c in document["candidates"]})
+    assert _answers(search_scenario(scenario, out, jobs=1)) == _answers(expected)
 
 
 def test_a_budget_ends_the_search_with_its_gap_and_a_second_run_goes_on(scenario, uninterrupted, tmp_path):
