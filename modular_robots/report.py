@@ -110,7 +110,7 @@ def export_controller_rate(folder: str | Path, rate: float = 1000.0) -> dict[str
     """
     folder = Path(folder)
     with ResultsFolder(folder, busy_hint="export it once that run has ended", create=False):
-        document, urdf, trajectory = read_winner(folder)
+        document, urdf, trajectory = read_winner(folder, obstacles=False)
         csv_path, json_path = folder / export_name(rate), folder / export_name(rate, ".json")
         _refuse_replacing_inputs(folder, document, (csv_path, json_path))
         robot = winner_robot(folder, document, urdf, trajectory)
@@ -161,9 +161,11 @@ def winner_robot(folder: Path, document: ResultDocument, urdf: str, trajectory: 
     return robot if armature is None else robot_from_urdf(urdf, armature)
 
 
-def read_winner(folder: str | Path) -> tuple[ResultDocument, str, Trajectory]:
+def read_winner(folder: str | Path, obstacles: bool = True) -> tuple[ResultDocument, str, Trajectory]:
     """``(result.json's document, winner.urdf's text, the trajectory)`` of the results folder
-    ``folder``, for what is made from a finished run (``export``, ``view``).
+    ``folder``, for what is made from a finished run (``export``, ``view``); without
+    ``obstacles``, the task's obstacles are not read
+    (:func:`~modular_robots.plan.document.read_document`).
 
     Raises
     ------
@@ -174,7 +176,7 @@ def read_winner(folder: str | Path) -> tuple[ResultDocument, str, Trajectory]:
         ``trajectory.csv`` that breaks its contract.
     """
     folder = Path(folder)
-    document = read_document(folder, require_winner=True)
+    document = read_document(folder, require_winner=True, obstacles=obstacles)
     urdf_path, trajectory_path = winner_plan_files(document, folder)
     try:
         urdf = urdf_path.read_text(encoding="utf-8")

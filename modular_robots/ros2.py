@@ -118,7 +118,7 @@ def write_ros2_bundle(
     if not 1.0 <= rate <= 1e5 or not 0.1 <= goal_rate <= 1e4:
         raise InputError(f"rates: expected 1 <= rate <= 1e5 and 0.1 <= goal rate <= 1e4 Hz, got {rate}, {goal_rate}")
     with ResultsFolder(results, busy_hint="export it once that run has ended", create=False):
-        document, urdf, trajectory = read_winner(results)
+        document, urdf, trajectory = read_winner(results, obstacles=False)
         robot = winner_robot(results, document, urdf, trajectory)
     joints = tuple(robot.joint_names)
     package = package_name(out)

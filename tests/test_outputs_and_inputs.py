@@ -18,6 +18,7 @@ from click.testing import CliRunner
 from modular_robots import load_scenario
 from modular_robots.cli import main
 from modular_robots.feasibility import FeasibilitySettings
+from modular_robots.obstacles import MeshObstacle, obstacle_to_json
 from modular_robots.pipeline import run_scenario
 from modular_robots.verdicts import VerdictFile, lock_path
 
@@ -252,6 +253,43 @@ def test_export_refuses_to_replace_the_plan_it_reads(finished, tmp_path, how):
         f"Error: .: {read}, and that is trajectory_100hz.csv, which this export writes; expected the run's own files "
         "(export at another rate, or run again)"
     )
+
+
+def test_export_and_ros2_need_not_the_meshes_the_run_read_but_view_does(finished, tmp_path):
+    """A results folder moved without the obstacle mesh its run read (or with the mesh edited):
+    the plan's export and the ROS 2 package are the same bytes as with the mesh in place; the page,
+    which draws the mesh, is refused and says which file."""
+    folder = tmp_path / "copy"
+    shutil.copytree(finished, folder)
+    stl = tmp_path / "fixture.stl"
+    stl.write_text(
+        "solid t\nfacet normal 0 0 1\nouter loop\nvertex 5 5 5\nvertex 6 5 5\nvertex 5 6 5\n"
+        "endloop\nendfacet\nendsolid t\n"
+    )
+    document = json.loads((folder / "result.json").read_text())
+    document["task"]["obstacles"].append(obstacle_to_json(MeshObstacle(stl, 1.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))))
+    (folder / "result.json").write_text(json.dumps(document))
+
+    def outputs(name: str) -> dict[str, bytes]:
+        for command in (
+            ["export", str(folder), "--rate", "100"],
+            ["export", str(folder), "--ros2", str(tmp_path / name / "cell")],
+        ):
+            result = CliRunner().invoke(main, command)
+            assert result.exit_code == 0, result.output
+        files = [
+            folder / "trajectory_100hz.csv",
+            folder / "trajectory_100hz.json",
+            *sorted((tmp_path / name).rglob("*")),
+        ]
+        return {str(f.relative_to(f.parent.parent)): f.read_bytes() for f in files if f.is_file()}
+
+    with_mesh = outputs("with")
+    stl.unlink()
+    without = outputs("without")
+    assert len(with_mesh) > 4 and list(with_mesh.values()) == list(without.values())
+    result = CliRunner().invoke(main, ["view", str(folder)])
+    assert result.exit_code == 1 and "fixture.stl" in result.output, result.output
 
 
 @pytest.mark.parametrize("edit", ["rows cut", "tf changed"])

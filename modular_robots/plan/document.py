@@ -307,8 +307,11 @@ def read_json(folder: str | Path) -> Any:
         raise InputError(f"{path}: expected the JSON a run writes ({shorten(exc, 120, quote=False)})") from None
 
 
-def read_document(folder: str | Path, require_winner: bool = False) -> ResultDocument:
+def read_document(folder: str | Path, require_winner: bool = False, obstacles: bool = True) -> ResultDocument:
     """``folder``'s ``result.json``, checked; with ``require_winner``, one that has a winner.
+    Without ``obstacles``, the task's obstacles are not read (its ``obstacles`` is empty): what
+    needs only the robot and its plan (``export``, ``--ros2``) does not depend on the meshes the
+    run read being where they were.
 
     Raises
     ------
@@ -322,10 +325,10 @@ def read_document(folder: str | Path, require_winner: bool = False) -> ResultDoc
     if require_winner and not (isinstance(data, dict) and isinstance(data.get("winner"), dict)):
         status = data.get("status") if isinstance(data, dict) else None
         raise InputError(f"{source}: no winner to read (the run's status is {status!r})")
-    return _document(Node(data, source))
+    return _document(Node(data, source), obstacles)
 
 
-def _document(n: Node) -> ResultDocument:
+def _document(n: Node, obstacles: bool = True) -> ResultDocument:
     return ResultDocument(
         source=n.source,
         scenario=n["scenario"].string(),
@@ -334,7 +337,7 @@ def _document(n: Node) -> ResultDocument:
         partial=n["partial"].boolean(),
         message=n["message"].string(),
         settings=_settings(n["settings"]),
-        task=_task(n["task"]),
+        task=_task(n["task"], obstacles),
         counts=n["counts"].counts(),
         seconds={k: n["seconds"][k].number(0.0) for k in n["seconds"].obj()},
         candidates=tuple(_candidate(c) for c in n["candidates"].items()),
@@ -356,13 +359,13 @@ def _settings(n: Node) -> SettingsRecord:
     )
 
 
-def _task(n: Node) -> TaskRecord:
-    obstacles = n["obstacles"].items()
+def _task(n: Node, obstacles: bool = True) -> TaskRecord:
+    shapes = n["obstacles"].items()
     return TaskRecord(
         payload=n["payload"].number(0.0),
         start=n["start"].numbers(size=3),
         goal=n["goal"].numbers(size=3),
-        obstacles=tuple(o.obstacle() for o in obstacles),
+        obstacles=tuple(o.obstacle() for o in shapes) if obstacles else (),
         cost=n["cost"].string(),
         waypoints=_waypoints(n),
     )
