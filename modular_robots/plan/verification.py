@@ -36,7 +36,8 @@ GOAL_TOLERANCE = 1e-5
 class Verification:
     """Figures of a re-integrated trajectory.
 
-    ``terminal_error`` [m]: tool position at ``tf`` vs the goal's; ``terminal_speed``: largest
+    ``terminal_error`` [m]: re-integrated tool position at ``tf`` vs the plan's last node's
+    (whose tool is within the task's tolerance of the goal); ``terminal_speed``: largest
     joint speed at ``tf``; ``max_defect``: largest over intervals of the summed scaled
     gaps between each sub-step's re-integrated end and the plan (the next node for the last
     sub-step), positions over half their range and velocities over their limit;
