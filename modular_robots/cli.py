@@ -225,7 +225,10 @@ def import_cobra_command(
     """Convert a CoBRA task (JSON) to a scenario YAML for a catalogue."""
     distinct_files([("-o", output)], [("TASK_JSON", task_json), ("--catalog", catalog)])
     imported = import_cobra(task_json, catalog, output, cost, payload, max_time)
-    scenario = imported.write(output, load_scenario)  # it reads back (every check of the reader), or is taken back
+    try:  # it reads back (every check of the reader), or is taken back
+        scenario = imported.write(output, load_scenario)
+    except InputError as exc:
+        raise InputError(f"{task_json}: not imported, the scenario it gives is refused ({exc})") from None
     assert scenario is not None
     goals = len(scenario.task.goals) + 1
     click.echo(

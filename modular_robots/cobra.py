@@ -164,6 +164,13 @@ def import_cobra(
     naming the file and the item."""
     task_path, output = Path(task_path), Path(output)
     where = str(task_path)
+    costs = {COBRA_COSTS[name] for name, _ in cobra_terms(cost)}
+    if max_time is None and costs == {"energy"} | (costs & {"mass", "joints"}):
+        raise ScenarioError(
+            f"cost {cost}: the mechanical energy without the cycle time has no minimum over the motion's duration "
+            "(a slower move always needs less: the drives hold the payload without doing work); give the longest "
+            "motion (--max-time SECONDS), or count the cycle time too (e.g. cyc_1,mechEnergy_0.01)"
+        )
     if task_path.stat().st_size > MAX_FILE_BYTES:
         raise ScenarioError(f"{where}: larger than {MAX_FILE_BYTES} bytes")
     try:

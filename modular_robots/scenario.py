@@ -212,8 +212,21 @@ def load_scenario(path: str | Path) -> Scenario:
     return _scenario_from_fields(load_yaml(Path(path), ScenarioError))
 
 
+def _not_a_cobra_task(top: Fields, expected: str = "a scenario") -> None:
+    """Refuse a CoBRA task (JSON with a ``header`` and ``goals``) where a scenario or a catalogue
+    is read, saying how to use it (its keys are not a scenario's)."""
+    if top.has("header") and top.has("goals") and not top.has("task"):
+        raise top.fail(
+            None,
+            f"expected {expected}, got a CoBRA task (JSON): solve it with `modular-robots run "
+            f"{top.path} --catalog CATALOG`, or convert it with `modular-robots import-cobra {top.path} "
+            "--catalog CATALOG -o SCENARIO.yaml`",
+        )
+
+
 def _scenario_from_fields(top: Fields) -> Scenario:
     top = top.reporting(ScenarioError)
+    _not_a_cobra_task(top)
     path = top.path
     name = top.string("name")
     top.check(
@@ -598,6 +611,7 @@ def load_scenario_or_catalog(path: str | Path) -> tuple[Scenario | None, Catalog
     """For commands that take either: a scenario file (has ``task``) or a bare catalogue."""
     path = Path(path)
     top = load_yaml(path, InputError)
+    _not_a_cobra_task(top, "a scenario or a catalogue")
     if top.has("task"):
         scenario = _scenario_from_fields(top)
         return scenario, scenario.catalog

@@ -267,6 +267,17 @@ def test_run_solves_a_cobra_task_directly(tmp_path):
     assert missing.exit_code != 0 and "--catalog" in missing.output and "CoBRA task" in missing.output
     scenario = CliRunner().invoke(main, ["run", str(out / "cobra" / "reach.yaml"), "--catalog", str(catalog)])
     assert scenario.exit_code != 0 and "a scenario names its own catalogue" in scenario.output
+    # the commands that read a scenario (or a catalogue) say how to use a task (not "name: missing")
+    for command in (["filter", str(path)], ["enumerate", str(path)], ["optimize", "--scenario", str(path), "B-J1"]):
+        refused = CliRunner().invoke(
+            main, [*command, "--out", str(tmp_path / "y")] if command[0] == "optimize" else command
+        )
+        assert refused.exit_code == 1, refused.output
+        assert refused.output.splitlines()[-1] == (
+            f"Error: {path}:1: (top level): expected a scenario{' or a catalogue' * (command[0] == 'enumerate')}, got a "
+            f"CoBRA task (JSON): solve it with `modular-robots run {path} --catalog CATALOG`, or convert it with "
+            f"`modular-robots import-cobra {path} --catalog CATALOG -o SCENARIO.yaml`"
+        )
 
 
 def test_sample_times_keep_every_event_and_the_step():
@@ -378,16 +389,25 @@ def test_the_check_fails_a_solution_that_breaks_a_goal(solved):
 
 
 def test_a_refused_import_leaves_the_folder_as_it_was(tmp_path):
-    """The reader refuses the written scenario (energy alone needs --max-time): nothing of it stays,
-    neither in a new folder nor over an earlier import, whose scenario and mesh are kept."""
+    """The reader refuses the written scenario (a max_time shorter than the task's pauses): nothing
+    of it stays, neither in a new folder nor over an earlier import, whose scenario and mesh are
+    kept; and the message says nothing was imported. Energy alone without a max_time is refused
+    before anything is written, naming the option."""
     task = ["import-cobra", str(TASKS / "PTP_pause.json"), "--catalog", str(IMPROV_6DOF)]
     fresh = tmp_path / "new" / "cell" / "pause.yaml"
-    refused = CliRunner().invoke(main, [*task, "-o", str(fresh), "--cost", "mechEnergy"])
-    assert refused.exit_code == 1 and "task.cost: energy" in refused.output, refused.output
+    short = ["--max-time", "0.001"]
+    refused = CliRunner().invoke(main, [*task, "-o", str(fresh), *short])
+    assert refused.exit_code == 1, refused.output
+    assert f"{TASKS / 'PTP_pause.json'}: not imported, the scenario it gives is refused (" in refused.output
+    assert "task.max_time: the pauses take 0.4 s" in refused.output
     assert not (tmp_path / "new").exists()
     kept = tmp_path / "kept" / "pause.yaml"
     assert CliRunner().invoke(main, [*task, "-o", str(kept)]).exit_code == 0
     files = {p: p.read_bytes() for p in kept.parent.rglob("*") if p.is_file()}
-    refused = CliRunner().invoke(main, [*task, "-o", str(kept), "--cost", "mechEnergy"])
-    assert refused.exit_code == 1 and "task.cost: energy" in refused.output, refused.output
+    refused = CliRunner().invoke(main, [*task, "-o", str(kept), *short])
+    assert refused.exit_code == 1 and "task.max_time: the pauses take" in refused.output, refused.output
     assert {p: p.read_bytes() for p in kept.parent.rglob("*") if p.is_file()} == files
+    energy = CliRunner().invoke(main, [*task, "-o", str(fresh), "--cost", "mechEnergy,mass"])
+    assert energy.exit_code == 1 and "--max-time SECONDS" in energy.output, energy.output
+    assert energy.output.startswith("Error: cost mechEnergy,mass: the mechanical energy without the cycle time")
+    assert not (tmp_path / "new").exists()
