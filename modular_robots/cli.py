@@ -357,7 +357,7 @@ def filter_command(
     "--max-iterations",
     type=click.IntRange(min=1, max=MAX_ITERATIONS),
     default=None,
-    help="Override the scenario's iteration limit.",
+    help="Override the scenario's iteration limit per solve (a solve stopped there goes on once more).",
 )
 @user_errors
 def optimize_command(

@@ -397,8 +397,16 @@ def _read_goals(f: Fields, start: tuple[float, float, float]) -> tuple[Goal, ...
                 f"{', '.join(map(shorten, unknown)) or 'none'}",
             )
         kind = kinds[0]
+        named = item.has("id")
         id_ = str(item.raw("id", str(number)))
-        item.check("id", id_ not in poses and all(g.id != id_ for g in goals), f"goal id {shorten(id_)} is used twice")
+        item.check("id", id_ != START, f"{START!r} names the start (as in return: {START}); expected another id")
+        clash = next((k for k, g in enumerate(goals) if g.id == id_), None)
+        if clash is not None:
+            raise item.fail(
+                "id" if named else None,
+                f"goal id {shorten(id_)} is used twice (goals[{clash}] has it)"
+                + ("" if named else "; it is this goal's default id, its place in the list: give one of them an id"),
+            )
         if kind == "pause":
             duration = item.number("pause", exclusive_minimum=0.0, maximum=MAX_TIME)
             goals.append(Goal("pause", id_, duration=duration))

@@ -110,7 +110,17 @@ def test_the_last_goal_is_at_rest_and_pauses_add_up():
         (
             "    - reach: [0.1, 0.5, 0.4]\n      id: a\n    - at: [0.2, 0.5, 0.4]\n      id: a",
             "goals[1].id",
-            "used twice",
+            "used twice (goals[0] has it)",
+        ),
+        (
+            "    - reach: [0.1, 0.5, 0.4]\n      id: start",
+            "goals[0].id",
+            "'start' names the start (as in return: start)",
+        ),
+        (
+            "    - reach: [0.1, 0.5, 0.4]\n      id: 2\n    - at: [0.2, 0.5, 0.4]",
+            "goals[1]: goal id '2'",
+            "is used twice (goals[0] has it); it is this goal's default id, its place in the list",
         ),
         ("    - reach: [0.45, 0.25, 0.2502]", "goals[0].reach", "from the one before"),
         ("    - reach: [0.1, 0.5, 0.4]\n    - pause: 0", "goals[1].pause", "expected a number > 0"),

@@ -317,6 +317,10 @@ class Candidate:
         outcome = yield from self._solve(problem, y0, offset, attempt)
         if outcome.limit_reached and self.restart and outcome.final is not None:
             outcome = yield from self._solve(problem, outcome.final.y, outcome.final.iteration, attempt)
+            if outcome.limit_reached:
+                outcome = replace(
+                    outcome, reason=outcome.reason + " (in two solves, the second from where the first stopped)"
+                )
         return outcome
 
     def _finish(self, status: CandidateStatus, reason: str, verification: Verification | None):
