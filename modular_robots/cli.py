@@ -7,6 +7,7 @@ import itertools
 import json
 import sys
 import time
+import webbrowser
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -652,9 +653,5 @@ def view_command(results: Path, open_page: bool) -> None:
     """Write RESULTS_DIR/winner.html (the winner moving around the obstacles, offline, one file)."""
     path = results / write_viewer(results)
     click.echo(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
-    if open_page:
-        code = click.launch(str(path))
-        if code != 0:
-            raise click.ClickException(
-                f"could not open a browser (the system's opener exited with {code}); open {path} yourself"
-            )
+    if open_page and not webbrowser.open(path.resolve().as_uri()):  # (False: no browser found, or it did not start)
+        raise click.ClickException(f"could not open a browser here; open {path} yourself")

@@ -100,8 +100,8 @@ def write_ros2_bundle(
     out
         The package's folder: missing, empty, or a bundle written before (replaced file by file).
     rate
-        The controller manager's ``update_rate`` [Hz] (rounded to a whole number, as its
-        parameter is an integer).
+        The controller manager's ``update_rate`` [Hz], a whole number (its parameter is an
+        integer).
     goal_rate
         Points per second of the goal's trajectory [Hz] (the controller interpolates between them);
         lowered as far as the goal's YAML needs to fit one command-line argument
@@ -111,12 +111,14 @@ def write_ros2_bundle(
     ------
     InputError
         If ``results`` has no winner, ``out`` is the results folder, inside it, or a folder
-        holding other files, or a rate is out of range.
+        holding other files, or a rate is out of range (or ``rate`` not whole).
     """
     results, out = Path(results), Path(out)
     _check_out(results, out)
     if not 1.0 <= rate <= 1e5 or not 0.1 <= goal_rate <= 1e4:
         raise InputError(f"rates: expected 1 <= rate <= 1e5 and 0.1 <= goal rate <= 1e4 Hz, got {rate}, {goal_rate}")
+    if rate != round(rate):
+        raise InputError(f"rate: expected a whole number of Hz (the controller manager's update_rate), got {rate:g}")
     with ResultsFolder(results, busy_hint="export it once that run has ended", create=False):
         document, urdf, trajectory = read_winner(results, obstacles=False)
         robot = winner_robot(results, document, urdf, trajectory)
@@ -230,7 +232,7 @@ def controllers(joints: tuple[str, ...], rate: float) -> dict:
     return {
         "controller_manager": {
             "ros__parameters": {
-                "update_rate": round(rate),
+                "update_rate": int(rate),
                 "joint_state_broadcaster": {"type": "joint_state_broadcaster/JointStateBroadcaster"},
                 "joint_trajectory_controller": {"type": "joint_trajectory_controller/JointTrajectoryController"},
             }

@@ -225,5 +225,10 @@ def test_a_bundle_is_never_written_over_its_inputs_or_someone_elses_files(result
         assert result.output.startswith("Error: ") and str(out) in result.output
     assert {p: p.read_bytes() for p in results.iterdir() if p.is_file()} == before
     assert not (results / "inside").exists() and [p.name for p in foreign.iterdir()] == ["notes.txt"]
+    fraction = CliRunner().invoke(main, ["export", str(results), "--ros2", str(tmp_path / "f"), "--rate", "333.3"])
+    assert fraction.exit_code == 1 and fraction.output == (
+        "Error: rate: expected a whole number of Hz (the controller manager's update_rate), got 333.3\n"
+    )  # (it wrote update_rate 333 for a goal sampled at 333.3 Hz)
+    assert not (tmp_path / "f").exists()
     again = CliRunner().invoke(main, ["export", str(results), "--ros2", str(bundle), "--rate", "500"])
     assert again.exit_code == 0, again.output  # a bundle of its own is replaced
