@@ -93,9 +93,11 @@ class Terminated(KeyboardInterrupt):
 
 def shorten(value: object, limit: int = 60, quote: bool = True) -> str:
     """``repr(value)`` (``str`` if not ``quote``), cut to about ``limit`` characters with its
-    length said, so that an error message never echoes a huge input."""
+    length said, so that an error message never echoes a huge input; a message (not ``quote``)
+    is cut between words where one ends in its last 20 characters."""
     text = repr(value) if quote else str(value)
     if len(text) <= limit:
         return text
     size = f"{len(value)} characters" if isinstance(value, str) else f"{len(text)} characters as text"
-    return f"{text[:limit]}... ({size})"
+    end = limit if quote else next((k for k in range(limit, max(limit - 20, 0), -1) if text[k] == " "), limit)
+    return f"{text[:end]}... ({size})"

@@ -709,9 +709,10 @@ def composition_space(
         total = min(total, limit)
     if total == 0:
         low, high = catalog.grammar.dof
+        where = f"{catalog.source}: grammar.dof: " if catalog.source else ""
         raise InputError(
-            f"the catalogue {shorten(catalog.name)} allows no composition (grammar.dof [{low}, {high}] with its "
-            "modules); nothing to check"
+            f"{where}the catalogue {shorten(catalog.name)} allows no composition of {low} to {high} DOF with its "
+            f"{len(catalog.modules)} modules; expected a grammar.dof its modules can make (or more modules)"
         )
     if total > max_compositions:
         low, high = catalog.grammar.dof

@@ -455,3 +455,40 @@ def test_shipped_scenarios_load():
     assert (paper.execution.engine, paper.execution.address) == ("process", None)  # the default
     five = load_scenario(PAPER_SCENARIO.with_name("paper-5kg.yaml"))
     assert five.task.payload == 5.0 and five.task.obstacles == paper.task.obstacles and five.catalog == paper.catalog
+
+
+def test_a_grammar_its_modules_cannot_make_is_refused_naming_the_file_and_key(tmp_path):
+    """IMPROV's 4-DOF grammar asked for 3 DOF: its joint pairs make 4, so no composition; the
+    refusal names the catalogue's file and grammar.dof (it named only the catalogue's name)."""
+    from click.testing import CliRunner
+
+    from modular_robots.cli import main
+
+    root = PAPER_SCENARIO.parent
+    catalog = tmp_path / "catalogs" / "improv.yaml"  # (beside the meshes it names)
+    catalog.parent.mkdir()
+    (catalog.parent / "meshes").symlink_to(root / "catalogs" / "meshes")
+    catalog.write_text(
+        (root / "catalogs" / "improv-4dof.yaml")
+        .read_text()
+        .replace("  dof:\n  - 4\n  - 4\n", "  dof:\n  - 3\n  - 3\n", 1)
+    )
+    scenario = tmp_path / "pick.yaml"
+    scenario.write_text(
+        re.sub(r"catalog: .*", "catalog: catalogs/improv.yaml", (root / "improv-pick.yaml").read_text())
+    )
+    result = CliRunner().invoke(main, ["filter", str(scenario)])
+    assert result.exit_code == 1 and result.output == (
+        f"Error: {catalog}: grammar.dof: the catalogue 'improv-4dof' allows no composition of 3 to 3 DOF with its 13 "
+        "modules; expected a grammar.dof its modules can make (or more modules)\n"
+    )
+
+
+def test_a_long_message_is_cut_between_words_and_a_value_where_it_reaches_the_limit():
+    from modular_robots.exceptions import shorten
+
+    message = "expected a grammar.dof its modules can make, got a catalogue with no joint modules at all " * 3
+    cut = shorten(message, 60, quote=False)
+    assert cut == f"expected a grammar.dof its modules can make, got a catalogue... ({len(message)} characters)"
+    assert shorten("x" * 100, 60, quote=False) == f"{'x' * 60}... (100 characters)"  # no space: at the limit
+    assert shorten(message, 60) == f"{message!r:.60}... ({len(message)} characters)"  # a value: at the limit

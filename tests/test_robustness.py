@@ -688,7 +688,13 @@ def finished(tmp_path_factory) -> Path:
         (lambda rows: rows[:2], "trajectory.csv: expected at least 2 rows (t = 0 and t = tf), got 1"),
         (
             lambda rows: rows[:3] + [rows[3].replace(rows[3].split(",")[2], "nan", 1)] + rows[4:],
-            "trajectory.csv:4: column q2: expected a finite number, got nan",
+            "trajectory.csv:4: column q2: expected a finite number, got 'nan'",
+        ),
+        (
+            lambda rows: (
+                rows[:4] + [",".join("1.5e" if k == 3 else c for k, c in enumerate(rows[4].split(",")))] + rows[5:]
+            ),
+            "trajectory.csv:5: column q3: expected a finite number, got '1.5e'",
         ),
         (
             lambda rows: rows[:5] + ["99" + rows[5][rows[5].index(",") :]] + rows[6:],
@@ -699,7 +705,7 @@ def finished(tmp_path_factory) -> Path:
             "trajectory.csv:5: expected 20 values, got 19",
         ),
     ],
-    ids=["header-only", "one-row", "nan", "time-backwards", "short-row"],
+    ids=["header-only", "one-row", "nan", "not-a-number", "time-backwards", "short-row"],
 )
 def test_export_and_view_refuse_a_damaged_trajectory_naming_row_and_column(finished, tmp_path, damage, message):
     folder = tmp_path / "copy"

@@ -110,15 +110,15 @@ class Trajectory:
             cells = line.split(",")
             if len(cells) != len(header):
                 raise ValueError(f"{path}:{number}: expected {len(header)} values, got {len(cells)}")
-            try:
-                row = [float(c) for c in cells]
-            except ValueError:
-                raise ValueError(f"{path}:{number}: expected numbers, got {line[:80]!r}") from None
-            bad = [header[k] for k, v in enumerate(row) if not math.isfinite(v)]
-            if bad:
-                raise ValueError(
-                    f"{path}:{number}: column {bad[0]}: expected a finite number, got {row[header.index(bad[0])]}"
-                )
+            row = []
+            for name, cell in zip(header, cells):
+                try:
+                    value = float(cell)
+                except ValueError:
+                    value = math.nan
+                if not math.isfinite(value):
+                    raise ValueError(f"{path}:{number}: column {name}: expected a finite number, got {cell[:40]!r}")
+                row.append(value)
             rows.append(row)
         if len(rows) < 2:
             raise ValueError(f"{path}: expected at least 2 rows (t = 0 and t = tf), got {len(rows)}")
