@@ -603,6 +603,13 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
 
         result = search_scenario(scenario, out, jobs, SearchSettings(budget=budget), on_progress=progress)
     click.echo(run_table(result, scenario, last))
+    if again := last.get("cut_again"):
+        click.echo(
+            f"warning: the budget stopped {len(again)} candidate(s) no further than a run before did "
+            f"({shorten(again[0])}{', ...' if len(again) > 1 else ''}): a stopped candidate starts over, so one that "
+            "takes longer than the budget never ends; raise --budget",
+            err=True,
+        )
     click.echo(f"wrote {written_files(out)}")
 
 

@@ -187,6 +187,9 @@ class _Search:
         self.rounds = 0
         #: Whether the budget stopped a batch of step C before its end.
         self.cut = False
+        #: Candidates the budget stopped no further than a run before did (a stopped candidate
+        #: starts over: one slower than the budget never ends).
+        self.cut_again: set[str] = set()
         #: Step C's batch under way: its candidates not ended yet and its lockstep round.
         self.running = (0, 0)
         self.steps = 0
@@ -439,6 +442,11 @@ class _Search:
             record(name for name in names if name in manager.results)
             recorded = {name: (_labelled(manager.results[name], self.specs[name]), None) for name in names}
             self.cut = cut and any(r.status == CandidateStatus.STOPPED for r, _ in recorded.values())
+            for name, (result, _) in recorded.items():
+                if self.cut and result.status == CandidateStatus.STOPPED and result.iterations:
+                    if result.iterations <= self.log.cuts.get(name, -1):
+                        self.cut_again.add(name)
+                    self.log.write_cut(name, result.iterations)
         for name in names:
             result = recorded[name][0]
             self.results[name] = result
@@ -533,6 +541,7 @@ class _Search:
             "lowest_bound": self._lowest(),
             "best": self.best.cost if self.best is not None else None,
             "eta": eta,
+            "cut_again": sorted(self.cut_again),
         }
         if self.first_estimate is None and eta is not None:
             self.first_estimate = {"at_s": round(self.seconds["search"], 3), "step_b_left_s": round(eta, 3)}
@@ -621,6 +630,8 @@ class _Log:
         self.verdicts: dict[tuple[int, str], dict] = {}
         self.results: dict[str, dict] = {}
         self.traces: dict[str, list] = {}
+        #: The most iterations each candidate stopped by a budget had reached in a run before.
+        self.cuts: dict[str, int] = {}
         self.file: IO[str] | None = None
 
     def check(self) -> None:
@@ -679,6 +690,8 @@ class _Log:
                 if "result" in entry:
                     self.results[entry["result"]["name"]] = entry["result"]
                     self.traces[entry["result"]["name"]] = entry["trace"]
+                elif "cut" in entry:
+                    self.cuts[entry["cut"]] = max(self.cuts.get(entry["cut"], 0), int(entry["iterations"]))
                 elif "batch" in entry:  # a record of before results were written one by one
                     self.results.update((d["name"], d) for d in entry["results"] if d["status"] != "stopped")
                 else:
@@ -699,6 +712,10 @@ class _Log:
 
     def write_verdict(self, stage: int, verdict: Verdict) -> None:
         self._write({"stage": stage, "verdict": {**verdict.to_json(), "seconds": verdict.seconds}})
+
+    def write_cut(self, name: str, iterations: int) -> None:
+        """Record that a budget stopped candidate ``name`` after ``iterations`` of its own."""
+        self._write({"cut": name, "iterations": iterations})
 
     def result(self, name: str) -> tuple[CandidateResult, list[Iterate] | None] | None:
         """The recorded end of candidate ``name`` and the trace step D saw of it (None: no trace,

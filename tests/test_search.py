@@ -10,6 +10,7 @@ and step C).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import random
@@ -216,6 +217,41 @@ def test_a_budget_stops_step_c_mid_batch_and_a_second_run_replays_what_ended(
         assert len(names) == len(set(names)) and set(ended_before) <= set(names)  # none solved twice
         assert set(names) == {c.name for c in again.candidates}  # every end recorded, dropped ones too
     assert cut_mid_batch  # some budget fell inside a batch, after one of its candidates had ended
+
+
+def test_a_candidate_the_budget_stops_again_no_further_is_named(scenario, uninterrupted, tmp_path, monkeypatch):
+    """A stopped candidate starts over in the next run: with the same budget, one cut in a batch
+    before anything of it ended is cut again at the same iteration, for ever. The second run
+    names such candidates (``cut_again``; ``run`` prints a warning to raise --budget); a run
+    without the budget then ends as the uninterrupted search."""
+    expected, _, _ = uninterrupted
+    clock = _Clock()
+    monkeypatch.setattr(search_module, "time", clock)
+
+    def cut_run(out, budget):
+        clock.now, figures = 0.0, []
+        with contextlib.suppress(InfeasibleError):  # (nothing verified yet)
+            search_scenario(
+                scenario,
+                out,
+                jobs=1,
+                settings=SearchSettings(budget=budget),
+                on_progress=lambda s, f: figures.append(f),
+            )
+        records = [json.loads(line) for line in (out / STATE).read_text().splitlines()[1:]]
+        return figures[-1]["cut_again"], [(r["cut"], r["iterations"]) for r in records if "cut" in r]
+
+    for budget in range(10, 200, 3):
+        out = tmp_path / f"budget-{budget}"
+        again, cuts = cut_run(out, budget)
+        if cuts:
+            break
+    assert cuts and again == []  # nothing to compare with in the first run
+    again, every = cut_run(out, budget)
+    second = every[len(cuts) :]
+    assert second and again == sorted(name for name, n in second if n <= dict(cuts).get(name, -1))
+    assert again  # the same budget over the same work: cut again where it was
+    assert _answers(search_scenario(scenario, out, jobs=1)) == _answers(expected)
 
 
 def test_a_record_of_another_search_is_refused_not_overwritten(scenario, uninterrupted, tmp_path):
