@@ -292,3 +292,33 @@ def test_a_ur5_plan_is_tracked_at_1khz_without_saturating_in_mujoco():
     reference = controller_rate(result.trajectory, robot, 1000.0)
     error, deviation, clipped = _mujoco_tracking(mujoco, m, qadr, dadr, reference, robot.effort_limit)
     assert error <= 0.01 and deviation <= 0.02 and clipped == 0.0
+
+
+def test_the_export_puts_a_plan_resting_a_few_ulps_past_a_limit_on_it():
+    """A plan that rests on a prismatic joint's upper limit comes out of the optimiser a few ulps
+    past it (1e-16 m); the controller-rate export puts such points on the limit (a controller
+    may refuse a point beyond the URDF's limits) and leaves a real excursion as it is."""
+    from modular_robots import Composition, load_catalog
+    from modular_robots.robot import robot_model
+
+    catalog = load_catalog(PAPER_5KG.parent / "catalogs" / "paper.yaml")
+    robot = robot_model(Composition.from_name("B-J1-L1-J2-L1-E1", catalog), catalog)
+    upper = robot.upper[1]
+    assert robot.lower[1] == 0.0 and 0.0 < upper < 1.0  # the prismatic joint
+    for past, kept in ((1e-16, False), (1e-6, True)):
+        t = np.array([0.0, 0.5, 1.0])
+        q = np.zeros((3, robot.nv))
+        q[:, 0] = [0.0, 0.1, 0.2]
+        q[1:, 1] = upper + past
+        exported = controller_rate(controller_rate_input(t, q), robot, 10.0).q
+        assert exported[:, 1].max() == (upper + past if kept else upper)
+        np.testing.assert_allclose(exported[:, 0], np.linspace(0.0, 0.2, 11))  # the other joints as they were
+
+
+def controller_rate_input(t: np.ndarray, q: np.ndarray):
+    """A plan through the rows ``q`` at times ``t``, each segment at constant speed."""
+    from modular_robots.plan.trajectory import Trajectory
+
+    qd = np.vstack([np.diff(q, axis=0) / np.diff(t)[:, None], np.zeros((1, q.shape[1]))])
+    zeros = np.zeros_like(q)
+    return Trajectory(t, q, qd, zeros, zeros, np.zeros((len(t), 3)))

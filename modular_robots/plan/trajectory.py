@@ -207,6 +207,7 @@ def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> T
     if t[-1] < tf - 1e-12:
         t = np.append(t, tf)
     q, qd, qdd = trajectory.at(t)
+    q = _onto_limits(q, robot.lower, robot.upper)
     h = np.diff(t)[:, None]
     mean = np.vstack([(qd[1:] - qd[:-1]) / h, np.zeros(robot.nv)])
     tau = robot.rnea(q, qd, mean)
@@ -223,3 +224,14 @@ def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> T
         trajectory.velocity_bound,
         trajectory.effort_bound,
     )
+
+
+def _onto_limits(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """``q`` with a position beyond a joint limit by rounding alone (at most 1e-12 of the limit's
+    size, or 1e-12) put on the limit: a plan that rests on a limit is resampled a few ulps past
+    it (1e-16 m on a prismatic joint), and a controller may refuse a point beyond the URDF's
+    limits. A larger excess is left as it is, for verification to report."""
+    slack = 1e-12 * np.maximum(1.0, np.maximum(np.abs(lower), np.abs(upper)))
+    below = (q < lower) & (q >= lower - slack)
+    above = (q > upper) & (q <= upper + slack)
+    return np.where(below, lower, np.where(above, upper, q))
