@@ -114,6 +114,22 @@ def _inverse_dynamics_between_rows(mujoco, m, d, qadr, dadr, t, q, qd, qdd, poin
     return np.array(out)
 
 
+def test_the_verifications_shares_cover_every_row_of_the_plan(tmp_path):
+    """``effort_share`` and ``velocity_share`` (per joint, the largest |value| / limit) bound the
+    plan's own rows, the last one too: the robot holds the payload still at the goal there (its
+    torque is gravity's alone), which the grid of the motion did not count (this composition's
+    third joint: 0.0638 on the grid, 0.0763 holding at the goal)."""
+    run = optimize_composition(load_scenario(SMALL), "B-J1-L3-J1-L3-E2", tmp_path)
+    plan, v = run.winner.trajectory, run.winner.verification
+    assert run.winner.status == "optimal", run.winner.reason
+    rows_effort = np.max(np.abs(plan.tau) / plan.effort_limit, axis=0)
+    rows_velocity = np.max(np.abs(plan.qd) / plan.velocity_limit, axis=0)
+    assert np.all(np.asarray(v.effort_share) >= rows_effort * (1.0 - 1e-9)), (v.effort_share, rows_effort)
+    assert np.all(np.asarray(v.velocity_share) >= rows_velocity * (1.0 - 1e-6)), (v.velocity_share, rows_velocity)
+    held = np.abs(plan.tau[-1]) / plan.effort_limit  # the goal's gravity torque, at rest
+    assert np.allclose(plan.qd[-1], 0.0, atol=1e-9) and np.all(np.asarray(v.effort_share) >= held)
+
+
 def test_forward_transcription_rows_follow_the_contract():
     """The forward transcription's acceleration varies within an interval: its rows are dense
     (1 ms) and still follow the contract exactly, with ``tau`` the inverse dynamics at the row;

@@ -176,7 +176,7 @@ def verify(
     vel_share = np.max(np.abs(v) / vmax, axis=0)
     tau_share = np.max(np.abs(torques) / tmax, axis=0)
     held = _held(problem, nodes)
-    if len(held):  # the pauses: the drives hold the payload still there
+    if len(held):  # the drives hold the payload still there
         tau_share = np.maximum(
             tau_share, np.max(np.abs(robot.rnea(held, np.zeros_like(held), np.zeros_like(held))) / tmax, axis=0)
         )
@@ -209,10 +209,13 @@ def verify(
 
 
 def _held(problem: ShootingProblem, nodes: np.ndarray) -> np.ndarray:
-    """The configurations ``(K, nv)`` where the plan stands still for a pause (the start, a via or
-    the goal with a hold)."""
+    """The configurations ``(K, nv)`` where the robot holds the payload still: the start and the
+    goal (before and after the motion; the plan's first and last rows), and a via with a pause."""
     at = [0, *(j * problem.phase_intervals for j in range(1, problem.phases)), problem.intervals]
-    return np.array([nodes[k, : problem.nv] for k, hold in zip(at, problem.route.holds) if hold > 0.0])
+    ends = (0, len(at) - 1)
+    return np.array(
+        [nodes[k, : problem.nv] for j, (k, hold) in enumerate(zip(at, problem.route.holds)) if hold > 0.0 or j in ends]
+    )
 
 
 def _goals(problem: ShootingProblem, nodes: np.ndarray) -> tuple[float, float]:
