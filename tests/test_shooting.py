@@ -640,10 +640,19 @@ def test_verification_integrates_all_substeps_as_each_on_its_own(paper, name, tr
     excess = max(0.0, float(np.max(np.maximum(robot.lower - q, q - robot.upper) / span)))
     assert got.position_excess == pytest.approx(excess, abs=1e-9)
     np.testing.assert_allclose(got.velocity_share, np.abs(v).max(axis=0) / robot.velocity_limit, rtol=1e-8)
+    ends = y_nodes_at_rest(problem, y)  # the payload held still at the start and the goal
+    holding = robot.rnea(ends, np.zeros_like(ends), np.zeros_like(ends))
+    tau = np.vstack([tau, holding])
     np.testing.assert_allclose(got.effort_share, np.abs(tau).max(axis=0) / robot.effort_limit, rtol=1e-8)
     error = np.linalg.norm(robot.tool_position(final[: problem.nv]) - robot.tool_position(problem.q_goal))
     assert got.terminal_error == pytest.approx(error, rel=1e-6, abs=1e-9)
     assert got.terminal_speed == pytest.approx(np.abs(final[problem.nv :]).max(), rel=1e-6, abs=1e-9)
+
+
+def y_nodes_at_rest(problem, y) -> np.ndarray:
+    """The plan's first and last configurations ``(2, nv)``."""
+    nodes = problem.unpack(y)[1]
+    return nodes[[0, -1], : problem.nv]
 
 
 def test_verification_one_substep_at_a_time_gives_the_same_figures(paper, monkeypatch):
