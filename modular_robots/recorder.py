@@ -24,7 +24,7 @@ from .collision import Approach
 from .exceptions import ResultsFolderError, Terminated, shorten
 from .execution import terminations_raise
 from .folder import ResultsFolder, atomic_write
-from .plan.candidate import CandidateResult
+from .plan.candidate import CandidateResult, CandidateStatus
 from .plan.document import (
     RESULT,
     STATUSES,
@@ -96,10 +96,12 @@ class RunRecorder:
     def __exit__(self, kind, exc, traceback) -> Literal[False]:
         try:
             if kind is not None and self.status == "running":
+                stopped = sum(r.status == CandidateStatus.STOPPED for r in self.results)
+                running = f"; {stopped} candidate(s) still running were stopped" if stopped else ""
                 if issubclass(kind, Terminated):
-                    self._end("interrupted", f"{exc}; candidates still running were stopped")
+                    self._end("interrupted", f"{exc}{running}")
                 elif issubclass(kind, KeyboardInterrupt):
-                    self._end("interrupted", "interrupted by the user; candidates still running were stopped")
+                    self._end("interrupted", f"interrupted by the user{running}")
                 else:
                     self._end("failed", f"stopped by an error: {_describe(exc)}")
         finally:
@@ -113,13 +115,16 @@ class RunRecorder:
         seconds: dict | None = None,
         results: Sequence[CandidateResult] | None = None,
         search: dict | None = None,
+        message: str | None = None,
         every: float = 0.0,
     ) -> None:
-        """Merge stage ``counts`` and ``seconds``, replace the candidate ``results`` and the
-        ``search`` block, and rewrite the document unless it was written less than ``every``
-        seconds ago."""
+        """Merge stage ``counts`` and ``seconds``, replace the candidate ``results``, the
+        ``search`` block and the ``message`` (e.g. a search's certificate, which the winner's page
+        shows), and rewrite the document unless it was written less than ``every`` seconds ago."""
         if search is not None:
             self.search = search
+        if message is not None:
+            self.message = message
         self.counts.update(counts or {})
         self.seconds.update(seconds or {})
         if results is not None:

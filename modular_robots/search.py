@@ -221,8 +221,8 @@ class _Search:
             self.recorder = recorder
             try:
                 ended = self._loop(start, deadline)
-            except BaseException:  # Ctrl-C, SIGTERM, an error: result.json lists what has ended
-                self._keep_results()
+            except BaseException:  # Ctrl-C, SIGTERM, an error: result.json says what had ended
+                self._record(write=False)  # (the recorder writes it as it records the ending)
                 raise
             certificate = self._certificate(ended)
             self.certificate = certificate.to_json()
@@ -291,16 +291,20 @@ class _Search:
         candidates = self._take(_CANDIDATE, self.settings.candidates) if later else []
         if candidates:
             t0 = time.perf_counter()
-            self._optimise(candidates, deadline)
-            self.seconds["optimization"] += time.perf_counter() - t0
+            try:
+                self._optimise(candidates, deadline)
+            finally:  # (an interrupted run's seconds too)
+                self.seconds["optimization"] += time.perf_counter() - t0
             if self.cut:  # the budget: no step B after it
                 return
         checks = (self._take(_RELAXED, self.batch) if later else []) + self._take(_UNCHECKED, self.batch)
         self.unchecked -= sum(item.kind == _UNCHECKED for item in checks)
         if checks:
             t0 = time.perf_counter()
-            self._check(checks)
-            self.seconds["feasibility"] += time.perf_counter() - t0
+            try:
+                self._check(checks)
+            finally:
+                self.seconds["feasibility"] += time.perf_counter() - t0
 
     # -- stage 0: the catalogue bounds --------------------------------------------------------------
     def _take_pass(self, after: tuple | None, deadline: float) -> None:
@@ -421,8 +425,9 @@ class _Search:
                 for name in ended:
                     if name not in written:
                         written.add(name)
-                        self.results[name] = _labelled(manager.results[name], self.specs[name])
-                        self.log.write_result(self.results[name], executor.traces[name])
+                        self.results[name] = result = _labelled(manager.results[name], self.specs[name])
+                        self.log.write_result(result, executor.traces[name])
+                        self._better(result)
 
             cut = False
             try:
@@ -434,6 +439,12 @@ class _Search:
                     if progress.alive and time.perf_counter() >= deadline:
                         cut = True
                         break
+            except BaseException:  # the candidates it stopped, for result.json (not for the record)
+                rounds.close()
+                for name in names:
+                    if name in manager.results and name not in self.results:
+                        self.results[name] = _labelled(manager.results[name], self.specs[name])
+                raise
             finally:
                 self.running = (0, 0)
                 rounds.close()
@@ -451,10 +462,16 @@ class _Search:
             result = recorded[name][0]
             self.results[name] = result
             self.ledger.candidate(result, bounds[name])
-            if result.status == CandidateStatus.OPTIMAL and (
-                self.best is None or (result.cost, result.name) < (self.best.cost, self.best.name)
-            ):
-                self.best = result
+            self._better(result)
+
+    def _better(self, result: CandidateResult) -> None:
+        """Make ``result`` the best so far if it is verified and below it (ties by name). A batch's
+        candidates count as they end, for the progress and ``result.json``; its own decisions were
+        taken against the best before it."""
+        if result.status == CandidateStatus.OPTIMAL and (
+            self.best is None or (result.cost, result.name) < (self.best.cost, self.best.name)
+        ):
+            self.best = result
 
     # -- the end ---------------------------------------------------------------------------------
     def _certificate(self, ended: str) -> Certificate:
@@ -482,7 +499,7 @@ class _Search:
 
     def _finish(self, recorder: RunRecorder, certificate: Certificate, start: float) -> SearchResult:
         results = self._ranked()
-        recorder.update(results=results, counts=self._counts(results))
+        recorder.update(results=results, counts=self._counts(results), message=certificate.line())
         if self.best is None:
             if certificate.ended == "budget":
                 message = "no composition verified within the budget (run again into this folder to go on); "
@@ -524,7 +541,9 @@ class _Search:
         left = self.unchecked + (self.space - self.passed)
         return left * seconds / done / max(self.engine.jobs, 1)
 
-    def _record(self, every: float = 0.0) -> None:
+    def _record(self, every: float = 0.0, write: bool = True) -> None:
+        """Give the recorder the progress (and, when it writes, the results) and tell ``notify``;
+        ``write`` False: everything, without writing or telling (the search is ending)."""
         eta = self._eta()
         figures = {
             "space": self.space,
@@ -551,10 +570,11 @@ class _Search:
             "first_estimate": self.first_estimate,
             "certificate": self.certificate,
         }
-        if self.recorder.due(every):
+        if not write or self.recorder.due(every):
             self._keep_results()
-        self.recorder.update(search=block, seconds=self.seconds, every=every)
-        self.notify("search", figures)
+        self.recorder.update(search=block, seconds=self.seconds, every=every if write else math.inf)
+        if write:
+            self.notify("search", figures)
 
 
 def _check_chunk(context, chunk: list[tuple[int, Composition]]) -> list[Verdict]:

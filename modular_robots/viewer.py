@@ -220,9 +220,11 @@ def panel(document: ResultDocument) -> str:
         rows.append(("speed use per joint", " ".join(f"{100 * u:.0f}%" for u in used.velocity)))
     figures = "".join(f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in rows)
     ranking = _ranking(document.candidates, w.candidate, document.settings.cost)
+    searched = document.settings.extra.get("search") == "best-first" and document.message
+    certificate = f"<p class='sub'>best-first search: {e(document.message)}</p>" if searched else ""
     return (
         f"<h1>{e(w.composition)}</h1><p class='sub'>{e(document.scenario)}: the winner "
-        f"({e(w.boundary_pair)} boundary pair)</p><table class='figures'>{figures}</table>"
+        f"({e(w.boundary_pair)} boundary pair)</p>{certificate}<table class='figures'>{figures}</table>"
         f"<p class='sub'>{_legend()}</p><h2>Candidates</h2>{ranking}"
     )
 

@@ -11,6 +11,7 @@ and step C).
 from __future__ import annotations
 
 import contextlib
+import html
 import json
 import math
 import random
@@ -83,6 +84,8 @@ def test_the_search_finds_the_exhaustive_runs_winner_and_certifies_it(path, tmp_
     document = json.loads((out / "result.json").read_text())
     assert document["status"] == "done" and document["search"]["certificate"]["certified_optimal"] is True
     assert document["winner"]["composition"] == exhaustive.winner.composition
+    # the page says what the search proved (a budget's winner is not certified)
+    assert f"best-first search: {html.escape(certificate.line())}" in (out / "winner.html").read_text()
 
 
 class _Stop(KeyboardInterrupt):
@@ -112,9 +115,16 @@ def test_a_search_stopped_anywhere_ends_as_an_uninterrupted_one_when_run_again(s
             search_scenario(scenario, out, jobs=1, on_progress=_stop_at(moment))
         document = json.loads((out / "result.json").read_text())
         assert document["status"] == "interrupted"
-        # result.json lists every candidate that had ended, as search.jsonl records them
-        assert {c["candidate"] for c in document["candidates"]} == _recorded(out), moment
-        assert document["counts"]["candidates"] == len(document["candidates"])
+        # result.json lists every candidate that had ended, as search.jsonl records them, and
+        # those the stop cut short; the best verified cost is the smallest of the verified
+        listed = {c["candidate"]: c for c in document["candidates"]}
+        ended = {name for name, c in listed.items() if c["status"] != "stopped"}
+        assert ended == _recorded(out), moment
+        stopped = len(listed) - len(ended)
+        assert document["counts"]["candidates"] == len(listed) and document["counts"]["stopped"] == stopped
+        assert ("still running were stopped" in document["message"]) == (stopped > 0)
+        verified = [c["cost"] for c in listed.values() if c["status"] == "optimal"]
+        assert document["search"]["progress"]["best"] == min(verified, default=None), moment
         again = search_scenario(scenario, out, jobs=1 + trial % 2)
         assert _answers(again) == _answers(expected), moment
 
@@ -144,7 +154,7 @@ def test_a_search_stopped_again_while_it_goes_on_keeps_what_had_ended(scenario, 
         search_scenario(scenario, out, jobs=1, on_progress=replayed)
     document = json.loads((out / "result.json").read_text())
     assert document["status"] == "interrupted"
-    assert before <= {c["candidate"] for c in document["candidates"]} == _recorded(out)
+    assert before <= {c["candidate"] for c in document["candidates"] if c["status"] != "stopped"} == _recorded(out)
     counts = document["counts"]
     assert counts["candidates"] == len(document["candidates"]) and counts["enumerated"] >= counts["feasible"] > 0
     assert counts["optimized"] == len({c["composition"] for c in document["candidates"]})
