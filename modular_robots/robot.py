@@ -250,8 +250,9 @@ class RobotModel:
 
     # -- dynamics ---------------------------------------------------------------------------
     def rnea(self, q, v, a) -> np.ndarray:
-        """Inverse dynamics: motor-side joint torques/forces [N m or N] for ``(q, v, a)``, gravity,
-        armature and friction included; ``(nv,)``, or ``(K, nv)`` for ``K`` rows of each."""
+        """Inverse dynamics: the drives' joint torques/forces [N m or N] (at the joint, after the
+        gear) for ``(q, v, a)``, gravity, armature and friction included; ``(nv,)``, or ``(K, nv)``
+        for ``K`` rows of each."""
         tau = self._rows(pin.rnea, q, v, a)
         return tau + self.friction(v) if self.has_friction else tau
 

@@ -25,7 +25,7 @@ import numpy as np
 if TYPE_CHECKING:
     from ..robot import RobotModel
 
-__all__ = ["Trajectory", "controller_rate", "joint_trajectory", "MAX_ROWS", "CONTRACT_TOLERANCE"]
+__all__ = ["Trajectory", "controller_rate", "held_torques", "joint_trajectory", "MAX_ROWS", "CONTRACT_TOLERANCE"]
 
 #: The most rows :func:`controller_rate` makes (1000 s of plan at 1 kHz): each row is an inverse
 #: dynamics call and ~0.5 kB of CSV, so more would take minutes, gigabytes and a controller no use.
@@ -189,10 +189,11 @@ def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> T
     ``tf``), positions, velocities and accelerations exact (:meth:`Trajectory.at`).
 
     Its torques follow the *zero-order-hold contract* (SPEC §7): ``tau_i``, held from ``t_i`` to
-    ``t_{i+1}``, drives the robot from row ``i`` to row ``i + 1``. It is the inverse dynamics at row
-    ``i`` with the mean acceleration to the next row, so that a torque held across an instant
-    where the plan's acceleration jumps still lands on the next row's velocity. ``qdd`` holds the
-    plan's own acceleration at each row.
+    ``t_{i+1}``, drives the robot from row ``i`` to row ``i + 1``. It is the mean over that step of
+    the plan's own inverse dynamics (:func:`held_torques`), so that a torque held across an instant
+    where the plan's acceleration jumps, or where friction changes with the speed (from rest, or
+    at a reversal), still lands on the next row's velocity. ``qdd`` holds the plan's own
+    acceleration at each row; the last row's ``tau`` holds the robot at rest.
     """
     if not math.isfinite(rate) or rate <= 0.0:
         raise ValueError(f"rate: expected a positive number of rows per second, got {rate}")
@@ -208,9 +209,7 @@ def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> T
         t = np.append(t, tf)
     q, qd, qdd = trajectory.at(t)
     q = _onto_limits(q, robot.lower, robot.upper)
-    h = np.diff(t)[:, None]
-    mean = np.vstack([(qd[1:] - qd[:-1]) / h, np.zeros(robot.nv)])
-    tau = robot.rnea(q, qd, mean)
+    tau = np.vstack([held_torques(trajectory, robot, t), robot.rnea(q[-1], qd[-1], np.zeros(robot.nv))])
     tool = np.array([robot.tool_position(x) for x in q])
     return Trajectory(
         t,
@@ -224,6 +223,32 @@ def controller_rate(trajectory: Trajectory, robot: RobotModel, rate: float) -> T
         trajectory.velocity_bound,
         trajectory.effort_bound,
     )
+
+
+#: Gauss-Legendre points per piece of constant acceleration in :func:`held_torques`.
+HOLD_POINTS = 4
+
+
+def held_torques(trajectory: Trajectory, robot: RobotModel, t: np.ndarray) -> np.ndarray:
+    """``(K - 1, nv)``: for each step ``[t_i, t_{i+1}]`` of the times ``t`` (K, increasing, within
+    the plan), the mean of the plan's inverse dynamics over it [N m | N], the torque that, held
+    constant, changes the robot's momentum as the plan does.
+
+    Each step is cut at the plan's own rows (where its acceleration jumps) and every piece
+    integrated by :data:`HOLD_POINTS`-point Gauss-Legendre quadrature. The inverse dynamics at the
+    step's start with its mean acceleration (what this replaced) is the first term of that mean:
+    with Coulomb friction it missed the friction a start from rest meets within the step (row 0 of
+    improv-pick at 100 Hz held 16.4 N m where 23.2 N m reach the next row).
+    """
+    cuts = np.union1d(t, trajectory.t[(trajectory.t > t[0]) & (trajectory.t < t[-1])])
+    x, w = np.polynomial.legendre.leggauss(HOLD_POINTS)
+    a, b = cuts[:-1, None], cuts[1:, None]
+    points = (a + (b - a) * (x + 1.0) / 2.0).ravel()
+    q, qd, qdd = trajectory.at(points)
+    weighted = robot.rnea(q, qd, qdd).reshape(len(a), HOLD_POINTS, -1) * (w / 2.0)[None, :, None]
+    integrals = weighted.sum(axis=1) * (b - a)  # each piece's integral [N m s]
+    starts = np.searchsorted(cuts, t[:-1])
+    return np.add.reduceat(integrals, starts, axis=0) / np.diff(t)[:, None]
 
 
 def _onto_limits(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
