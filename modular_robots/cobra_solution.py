@@ -14,7 +14,10 @@
   a pause's at its end). The rows are at most the task's ``timeStepSize`` apart, every goal's
   instant among them, each move's rows evenly spaced; at every instant where the robot is at rest
   (the start, a ``reach``, a return, a pause, the end) ``dq`` and ``ddq`` are 0 and, over a pause,
-  ``q`` is constant, as CoBRA's goals test them exactly.
+  ``q`` is constant, as CoBRA's goals test them exactly. A position the plan takes past a joint
+  limit between its nodes (verification allows 1e-3 of the joint's range; 2e-5 m on a prismatic
+  joint of PTP_2_cycle) is put on the limit, as CoBRA checks the limits exactly; ``tau`` is that
+  row's.
 """
 
 from __future__ import annotations
@@ -101,6 +104,7 @@ def cobra_solution(scenario: Scenario, result: CandidateResult, robot: RobotMode
         q[rows] = q[first]
         dq[rows] = 0.0
         ddq[rows] = 0.0
+    q = np.clip(q, robot.lower, robot.upper)
     tau = robot.rnea(q, dq, ddq)
     modules = result.composition.split("-")
     catalog = scenario.catalog

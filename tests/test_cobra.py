@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -344,6 +345,24 @@ def test_a_solution_meets_every_goal_and_constraint_at_its_rows(solved):
     assert times["open"] == pytest.approx(times["place"] + 0.3)
     over = int(np.flatnonzero(np.isclose(t, times["over"]))[0])
     assert np.abs(np.array(document["trajectory"]["dq"][over])).max() > 0.05  # an at goal is passed moving
+
+
+def test_a_plan_a_little_past_a_joint_limit_is_written_on_it(solved):
+    """Between its nodes a plan may pass a joint limit by what verification allows (1e-3 of the
+    range); CoBRA checks the limits exactly, so the solution's rows are put on them (the checker
+    refused a PTP_2_cycle solution 2.24e-5 m past a prismatic joint's limit)."""
+    task, scenario, result, _ = solved
+    # joint 1's lower limit raised to 2e-5 rad above the lowest the plan takes it
+    lowest = float(result.trajectory.q[:, 0].min())
+    first = re.search(r'lower="([^"]+)"', result.urdf)
+    assert first is not None and float(first.group(1)) < lowest - 1e-3
+    urdf = result.urdf[: first.start(1)] + repr(lowest + 2e-5) + result.urdf[first.end(1) :]
+    robot = robot_from_urdf(urdf, result.drive["armature"])
+    assert robot.lower[0] == lowest + 2e-5
+    document = cobra_solution(scenario, result, robot, 1.0)
+    q = np.array(document["trajectory"]["q"])
+    assert q[:, 0].min() == robot.lower[0]
+    check_solution(task, document, urdf, result.drive["armature"])  # the limits, goals and tau = ID(rows)
 
 
 def test_a_weighted_cost_is_scored_with_timors_default_weights(solved):
