@@ -497,12 +497,13 @@ def _judge(cascade: _Cascade, label: str, outcome: _TargetOutcome) -> None:
     if outcome.orientation is not None:
         figures["ik_angle"] = max(figures.get("ik_angle", 0.0), outcome.angle)
     if not outcome.solutions:
-        pose = ""
+        pose, within = "", "joint limits"
         if outcome.orientation is not None:
             pose = f", {outcome.angle:.3g} rad from the orientation {outcome.orientation.describe()}"
+            within = "joint limits and the orientation's tolerance"
         cascade.fail(
             INVERSE_KINEMATICS.name,
-            f"inverse kinematics: no solution within joint limits at the {label} (closest {outcome.error:.3g} m{pose})",
+            f"inverse kinematics: no solution within {within} at the {label} (closest {outcome.error:.3g} m{pose})",
         )
         return
     # the composition needs at least its best ratio at every target seen so far
@@ -766,7 +767,7 @@ def filter_compositions(
 _NEAREST_MISS: dict[str, tuple[str, int, str]] = {
     REACH.name: ("reach_margin", -1, "largest reach margin found: {:.3g} m"),
     WORKSPACE.name: ("workspace_excess", 1, "smallest distance to a workspace box: {:.3g} m"),
-    INVERSE_KINEMATICS.name: ("ik_error", 1, "smallest IK error: {:.3g} m"),
+    INVERSE_KINEMATICS.name: ("ik_error", 1, "smallest IK position error: {:.3g} m"),
     STATIC_TORQUE.name: ("torque_ratio", 1, "best torque ratio found: {:.2f} x the limit"),
     COLLISION.name: ("clearance", -1, "largest clearance found: {:.3g} m"),
 }

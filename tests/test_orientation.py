@@ -177,6 +177,7 @@ def test_step_b_keeps_the_goal_orientation_and_says_which_test_removed_the_other
         assert math.acos(np.clip(-rotation[2, 2], -1, 1)) <= 0.05  # tool z within 0.05 rad of straight down
     removed = [v for v in verdicts if v.failed_test == "inverse kinematics"]
     assert removed and all("rad from the orientation axis [0.0, 0.0, -1.0]" in v.message for v in removed)
+    assert all("no solution within joint limits and the orientation's tolerance at the" in v.message for v in removed)
     # without the orientation, more compositions hold the goal
     free = check_compositions([v.composition for v in removed], catalog, replace(task, goal_orientation=None))
     assert sum(v.passed for v in free) > 0
