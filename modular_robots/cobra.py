@@ -219,13 +219,10 @@ def import_cobra(
         )
     to_base = np.linalg.inv(base)
     goals = data.get("goals", [])
-    _expect(
-        isinstance(goals, list) and len(goals) >= 2,
-        where,
-        "goals: expected at least two: a CoBRA task's start is free, so the first goal is the start, and a task of "
-        "one goal has no motion to optimise",
-    )
-    scenario_goals, start, first_id = _goals(goals, to_base, where)
+    least = "expected at least two: a CoBRA task's start is free, so the first goal is the start"
+    _expect(isinstance(goals, list) and len(goals) > 0, where, f"goals: none; {least}")
+    scenario_goals, start, first_id = _goals(goals, to_base, where)  # (each goal's type checked first)
+    _expect(len(goals) >= 2, where, f"goals: one; {least}, and one goal leaves no motion to optimise")
     if "allgoalsfulfilledinorder" in kinds:
         order = [str(i) for i in kinds["allgoalsfulfilledinorder"].get("order", [])]
         listed = [first_id, *(g.get("id") for g in scenario_goals)]

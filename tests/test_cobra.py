@@ -127,7 +127,9 @@ def _pose(x, y, z, r=0.01):
             "no position tolerance",
         ),
         (lambda t: t["goals"][1]["goalPose"].update(nominalParent="frame"), "poses in other frames are not supported"),
-        (lambda t: t["goals"].pop(), "expected at least two"),
+        (lambda t: t["goals"].pop(), "goals: one; expected at least two"),
+        (lambda t: t["goals"].clear(), "goals: none; expected at least two"),
+        (lambda t: t.update(goals=[{"ID": "f", "type": "follow"}]), "goals[0] (ID 'f'): the goal type 'follow' is not"),
         (lambda t: t["header"].update(gravity=[0, 0, -3.7]), "header.gravity"),
         (
             lambda t: t["constraints"][2]["pose"].update(
