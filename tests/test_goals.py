@@ -426,6 +426,10 @@ def test_free_ends_where_the_robot_pauses_are_held_within_the_effort_bounds(tmp_
     for q in (result.trajectory.q[0], result.trajectory.q[-1]):
         holding = pin.computeGeneralizedGravity(robot.model, robot.data, q)
         assert np.all(np.abs(holding) <= problem.effort_bound * (1 + 1e-6))
+    # one move between two pauses: its stop is listed, where the last pause starts (at rest)
+    (stop,) = result.stop_times
+    assert stop == pytest.approx(result.trajectory.t[-1] - 0.4, abs=1e-12) and stop > 0.3
+    assert np.abs(result.trajectory.at(np.array([stop, stop + 0.2]))[1]).max() < 1e-9
 
 
 def test_one_reach_goal_is_the_single_move_bit_for_bit(tmp_path):

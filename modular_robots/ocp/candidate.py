@@ -356,7 +356,9 @@ class Candidate:
             boundary_pair=self.boundary_pair,
             q_start=tuple(float(v) for v in ends[0]),
             q_goal=tuple(float(v) for v in ends[-1]),
-            stop_times=tuple(map(float, problem.stop_times(last.y))) if last and optimal and problem.route.vias else (),
+            stop_times=tuple(map(float, problem.stop_times(last.y)))
+            if last and optimal and (problem.route.vias or any(problem.route.holds))
+            else (),
             y=last.y if last else None,
             waypoints=problem.waypoints,
             trajectory=trajectory,
