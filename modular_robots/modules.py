@@ -205,8 +205,12 @@ class GeneralModule:
         (None for the first)."""
         by_parent = {j.parent: j for j in self.joints}
         out: list[tuple[Body, Joint | None]] = [(self.body(self.inlet.body), None)]
+        seen = {self.inlet.body}
         while out[-1][0].id in by_parent:
             joint = by_parent[out[-1][0].id]
+            if joint.child in seen:  # a loop (a body its own child): the chain ends; the loader refuses it
+                break
+            seen.add(joint.child)
             out.append((self.body(joint.child), joint))
         return tuple(out)
 
@@ -422,8 +426,9 @@ def read_general_module(f: Fields) -> GeneralModule:
     chain = module.chain()
     f.check(
         "joints",
-        len(chain) == len(bodies) and chain[-1][0].id == outlet.body,
-        "expected the joints to chain every body from the inlet's body to the outlet's",
+        len(chain) == len(bodies) == len(joints) + 1 and chain[-1][0].id == outlet.body,
+        "expected the joints to chain every body from the inlet's body to the outlet's, each body the child of "
+        "one joint (no loop, no branch)",
     )
     return module
 

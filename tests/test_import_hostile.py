@@ -206,6 +206,20 @@ WRITTEN_THEN_REFUSED = [
         _mutate(lambda db: _set(db, "J", 1, "ID", "J_a")),
         r"module J, body ids 'J_a' appears twice: expected distinct ids",
     ),
+    (  # the loader once followed the loop for ever, its memory growing until the OOM killer came
+        "a joint whose child is its parent",
+        _mutate(lambda db: _module(db, "J")["joints"][0].__setitem__("child", "J_a")),
+        r"module J: joints: expected the joints to chain every body .* \(no loop, no branch\)",
+    ),
+    (
+        "two joints in a loop",
+        _mutate(
+            lambda db: _module(db, "J")["joints"].append(
+                {**_module(db, "J")["joints"][0], "ID": "back", "parent": "J_b", "child": "J_a"}
+            )
+        ),
+        r"module J: joints: expected the joints to chain every body .* \(no loop, no branch\)",
+    ),
     (
         "ids that sanitise to one",
         _mutate(lambda db: _rename(db, "a<b", "a>b")),
