@@ -204,10 +204,12 @@ def _general_catalog(top: Fields) -> Catalog:
     notes = top.raw("notes", [])
     top.check("notes", isinstance(notes, list) and all(isinstance(n, str) for n in notes), "expected a list of strings")
     modules: dict[str, GeneralModule] = {}
+    where: dict[str, Fields] = {}
     for fields in top.mappings("modules"):
         module = read_general_module(fields)
         fields.check("id", module.id not in modules, f"duplicate module id {module.id!r}")
-        modules[module.id] = module
+        modules[module.id], where[module.id] = module, fields
+    _warn_unconnectable(modules, where)
     grammar = read_assembly_grammar(top.mapping("grammar"))
     check_grammar_ids(top, grammar, modules)
     top.done()
@@ -215,6 +217,23 @@ def _general_catalog(top: Fields) -> Catalog:
         if not any(m.kind == kind for m in modules.values()):
             raise top.fail("modules", f"expected at least one module of kind {kind!r}")
     return Catalog(name, tuple(modules.values()), grammar, str(top.path), tuple(notes))
+
+
+def _warn_unconnectable(modules: dict[str, GeneralModule], where: dict[str, Fields]) -> None:
+    """Warn of a module whose input meets no other module's output, or whose output meets no
+    input (Timor's rule: type, size and gender): no composition can hold it."""
+    for module in modules.values():
+        ends = (
+            ("inlet", "input", module.inlet, "outlet", "output", module.kind != "base"),
+            ("outlet", "output", module.outlet, "inlet", "input", module.kind != "effector"),
+        )
+        for key, name, connector, other, other_name, needed in ends:
+            if needed and not any(getattr(m, other).meets(connector) for m in modules.values() if m is not module):
+                where[module.id].warn(
+                    key,
+                    f"module {module.id}'s {name} ({connector.type} {list(connector.size)}, {connector.gender}) "
+                    f"meets no module's {other_name}: no composition holds it (a connector's type or size mistyped?)",
+                )
 
 
 _TURN = "a twist is an angle in degrees; beyond a turn, it is a typo"

@@ -713,7 +713,8 @@ def composition_space(
         where = f"{catalog.source}: grammar.dof: " if catalog.source else ""
         raise InputError(
             f"{where}the catalogue {shorten(catalog.name)} allows no composition of {low} to {high} DOF with its "
-            f"{len(catalog.modules)} modules; expected a grammar.dof its modules can make (or more modules)"
+            f"{len(catalog.modules)} modules; expected a grammar.dof its modules can make (or more modules, or "
+            "connectors that meet)"
         )
     if total > max_compositions:
         low, high = catalog.grammar.dof

@@ -480,7 +480,7 @@ def test_a_grammar_its_modules_cannot_make_is_refused_naming_the_file_and_key(tm
     result = CliRunner().invoke(main, ["filter", str(scenario)])
     assert result.exit_code == 1 and result.output == (
         f"Error: {catalog}: grammar.dof: the catalogue 'improv-4dof' allows no composition of 3 to 3 DOF with its 13 "
-        "modules; expected a grammar.dof its modules can make (or more modules)\n"
+        "modules; expected a grammar.dof its modules can make (or more modules, or connectors that meet)\n"
     )
 
 
@@ -492,3 +492,32 @@ def test_a_long_message_is_cut_between_words_and_a_value_where_it_reaches_the_li
     assert cut == f"expected a grammar.dof its modules can make, got a catalogue... ({len(message)} characters)"
     assert shorten("x" * 100, 60, quote=False) == f"{'x' * 60}... (100 characters)"  # no space: at the limit
     assert shorten(message, 60) == f"{message!r:.60}... ({len(message)} characters)"  # a value: at the limit
+
+
+def test_a_module_whose_connector_meets_none_is_named_when_the_catalogue_is_read(tmp_path):
+    """A connector's type mistyped (L3's input 'schunky'): no composition can hold L3, and the
+    count fell without a word; the reader warns, naming the file, line, module and connector."""
+    import warnings
+
+    from modular_robots.composition import count_compositions
+    from modular_robots.exceptions import InputWarning
+
+    root = PAPER_SCENARIO.parent / "catalogs"
+    text = (root / "improv-4dof.yaml").read_text()
+    (tmp_path / "meshes").symlink_to(root / "meshes")
+    path = tmp_path / "improv.yaml"
+    marker = "    id: 12_proximal_connector\n"
+    start = text.index(marker)
+    path.write_text(text[:start] + text[start:].replace("    type: schunk\n", "    type: schunky\n", 1))
+    line = text[: text.index("  inlet:\n", text.index("- id: L3"))].count("\n") + 1
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        catalog = load_catalog(path)
+    said = [str(w.message) for w in caught if issubclass(w.category, InputWarning)]
+    assert said == [
+        f"{path}:{line}: modules[1].inlet: module L3's input (schunky [1.0], f) meets no module's output: no "
+        "composition holds it (a connector's type or size mistyped?)"
+    ]
+    assert sum(count_compositions(catalog).values()) < sum(
+        count_compositions(load_catalog(root / "improv-4dof.yaml")).values()
+    )
