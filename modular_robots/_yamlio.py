@@ -6,6 +6,7 @@ error names the file, the line, the key path and what was expected.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import re
@@ -263,7 +264,9 @@ class Fields:
         self._read.add(key)
         if key not in self._data:
             if default is _MISSING:
-                raise self._error(f"{self.path}:{self._data.line}: {self.key_path(key)}: missing required key")
+                raise self._error(
+                    f"{self.path}:{self._data.line}: {self.key_path(key)}: missing required key{self._near(key)}"
+                )
             return default
         return self._data[key]
 
@@ -417,6 +420,15 @@ class Fields:
                     f"expected a mapping, got {_kind(item)}"
                 )
             yield Fields(item, self.path, f"{self.key_path(key)}[{i}]", self._error)
+
+    def _near(self, key: str) -> str:
+        """For a missing ``key``: the written key that looks like it (a misspelling), if any."""
+        written = [str(k) for k in self._data if isinstance(k, str) and k not in self._read]
+        close = difflib.get_close_matches(key, written, n=1, cutoff=0.6)
+        if not close:
+            return ""
+        line = self._data.key_lines.get(close[0], self._data.line)
+        return f" (line {line} has {shorten(close[0])}: a misspelling of {key}?)"
 
     def done(self) -> None:
         """Raise for the first key that no getter read (an unknown or misspelt key, or a key that

@@ -521,3 +521,19 @@ def test_a_module_whose_connector_meets_none_is_named_when_the_catalogue_is_read
     assert sum(count_compositions(catalog).values()) < sum(
         count_compositions(load_catalog(root / "improv-4dof.yaml")).values()
     )
+
+
+def test_a_misspelt_required_key_is_named_beside_the_missing_one(tmp_path):
+    """``catalogue:`` for ``catalog:`` said only 'catalog: missing required key'; the key written
+    nearest to it is named with its line. Nothing alike written: no hint."""
+    path = _scenario(tmp_path, "catalog: catalogs/paper.yaml", "catalogue: catalogs/paper.yaml")
+    with pytest.raises(ScenarioError) as error:
+        load_scenario(path)
+    top, line = _line(path.read_text(), "name:"), _line(path.read_text(), "catalogue:")
+    assert str(error.value) == (
+        f"{path}:{top}: catalog: missing required key (line {line} has 'catalogue': a misspelling of catalog?)"
+    )
+    path = _scenario(tmp_path, "catalog: catalogs/paper.yaml", "")
+    with pytest.raises(ScenarioError) as error:
+        load_scenario(path)
+    assert str(error.value) == f"{path}:{top}: catalog: missing required key"
