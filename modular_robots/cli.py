@@ -368,7 +368,7 @@ def optimize_command(
 
     A composition whose fastest IK pair's straight line passes an obstacle is optimised from its
     fastest clear pair too, one after the other, and the better verified motion wins (as in
-    ``run``); NAME+clear or NAME+fastest optimises from that pair only.
+    run); NAME+clear or NAME+fastest optimises from that pair only.
     """
     scenario = load_scenario(scenario_path)
     distinct_files(
