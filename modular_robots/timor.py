@@ -652,6 +652,11 @@ def _read_overrides(path: Path | None) -> dict:
             given: dict[str, Any] = {}
             if limits.has("position"):
                 given["position"] = list(limits.vector("position", 2))
+                limits.check(
+                    "position",
+                    given["position"][0] < given["position"][1],
+                    f"expected [lower, upper] with lower < upper, got {given['position']}",
+                )
             for key in ("velocity", "effort", "acceleration"):
                 if limits.has(key):
                     given[key] = limits.number(key, exclusive_minimum=0.0)
@@ -723,7 +728,13 @@ def _check_written(result: TimorImport, path: Path, overrides: Path | None) -> N
         match = re.match(r"modules\[(\d+)\]\.?(.*)", message)
         if match:
             module_id = result.data["modules"][int(match[1])]["id"]
-            raise CatalogError(f"{path}: module {module_id}: {match[2]} (the catalogue loader refuses it)") from None
+            overridden = overrides is not None and any(
+                line.startswith(f"module {module_id},") for line in result.overrides
+            )
+            after = f"; {overrides} overrides this module's values" if overridden else ""
+            raise CatalogError(
+                f"{path}: module {module_id}: {match[2]} (the catalogue loader refuses it{after})"
+            ) from None
         source = overrides if overrides is not None and message.startswith(("grammar", "name", "notes")) else path
         raise CatalogError(f"{source}: {message} (the catalogue loader refuses it)") from None
     finally:

@@ -463,3 +463,17 @@ def test_a_misspelt_key_of_an_overrides_file_is_refused_with_every_key_it_may_ha
     assert str(error.value) == (
         f"{overrides}:1: nmae: unknown key (expected one of: description, grammar, name, notes, overrides, remove)"
     )
+
+
+def test_reversed_position_limits_in_an_overrides_file_are_blamed_on_it(tmp_path):
+    """[1.5, -1.5] in an override was reported against the Timor database (a file that is fine)."""
+    text = (CATALOGS / "timor" / "geometric.overrides.yaml").read_text()
+    given = "    limits: {velocity: 0.5, effort: 1000.0}\n"
+    overrides = tmp_path / "reversed.overrides.yaml"
+    overrides.write_text(text.replace(given, "    limits: {velocity: 0.5, effort: 1000.0, position: [1.5, -1.5]}\n", 1))
+    line = text[: text.index(given)].count("\n") + 1
+    with pytest.raises(CatalogError) as error:
+        import_timor(GEOMETRIC_JSON, overrides)
+    assert str(error.value) == (
+        f"{overrides}:{line}: overrides[0].limits.position: expected [lower, upper] with lower < upper, got [1.5, -1.5]"
+    )
