@@ -40,6 +40,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from ._yamlio import MAX_FILE_BYTES, MAX_MAGNITUDE, Fields, _LineLoader, load_yaml
 from .catalog import MAX_ID_LENGTH, catalog_from_fields
+from .composition import count_compositions
 from .exceptions import CatalogError, shorten
 from .folder import atomic_path, atomic_write
 from .modules import MAX_MASS, PENDING_MESHES, _physical_inertia, read_assembly_grammar
@@ -722,7 +723,7 @@ def _check_written(result: TimorImport, path: Path, overrides: Path | None) -> N
     where = Path("<catalogue>")
     pending = PENDING_MESHES.set(frozenset(str((where.parent / name).resolve()) for name in result.meshes))
     try:
-        catalog_from_fields(Fields(parsed, where, "", CatalogError))
+        catalog = catalog_from_fields(Fields(parsed, where, "", CatalogError))
     except CatalogError as exc:
         message = re.sub(r"^<catalogue>:\d+: ", "", str(exc))
         match = re.match(r"modules\[(\d+)\]\.?(.*)", message)
@@ -739,6 +740,12 @@ def _check_written(result: TimorImport, path: Path, overrides: Path | None) -> N
         raise CatalogError(f"{source}: {message} (the catalogue loader refuses it)") from None
     finally:
         PENDING_MESHES.reset(pending)
+    if not any(count_compositions(catalog).values()):
+        low, high = catalog.grammar.dof
+        raise CatalogError(
+            f"{overrides if overrides is not None else path}: grammar: the catalogue allows no composition of {low} to "
+            f"{high} DOF with its {len(catalog.modules)} modules; expected a grammar.dof its joint sequences can make"
+        )
 
 
 def import_timor(modules_json: str | Path, overrides: str | Path | None = None) -> TimorImport:

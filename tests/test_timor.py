@@ -477,3 +477,17 @@ def test_reversed_position_limits_in_an_overrides_file_are_blamed_on_it(tmp_path
     assert str(error.value) == (
         f"{overrides}:{line}: overrides[0].limits.position: expected [lower, upper] with lower < upper, got [1.5, -1.5]"
     )
+
+
+def test_an_overrides_grammar_that_allows_no_composition_is_refused(tmp_path):
+    """improv-4dof's joint sequences make 4 DOF; asked for 6, the import wrote a catalogue of no
+    composition (and exited 0); it is refused, naming the overrides file."""
+    overrides = tmp_path / "six.overrides.yaml"
+    text = (CATALOGS / "timor" / "improv-4dof.overrides.yaml").read_text()
+    overrides.write_text(text.replace("  dof: [4, 4]\n", "  dof: [6, 6]\n", 1))
+    with pytest.raises(CatalogError) as error:
+        import_timor(IMPROV_JSON, overrides)
+    assert str(error.value).startswith(
+        f"{overrides}: grammar: the catalogue allows no composition of 6 to 6 DOF with its "
+    )
+    assert import_timor(IMPROV_JSON, CATALOGS / "timor" / "improv-4dof.overrides.yaml").data["grammar"]["dof"] == [4, 4]
