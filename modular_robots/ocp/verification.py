@@ -33,7 +33,18 @@ from scipy.integrate import DOP853
 from ..plan.verification import TERMINAL_TOLERANCE, Verification
 from .shooting import ShootingProblem
 
-__all__ = ["Verification", "verify", "TERMINAL_TOLERANCE"]
+__all__ = ["Verification", "verify", "grid_density", "MIN_GRID_POINTS", "TERMINAL_TOLERANCE"]
+
+#: The fewest points of the dense grid over a whole plan: a coarse transcription (3 nodes, one
+#: sub-step) measured at 8 points per sub-step saw 18 instants over 3.5 s, and reported a clearance
+#: 1.65 mm above the plan's. The default 8 nodes and 4 sub-steps give 224 already.
+MIN_GRID_POINTS = 200
+
+
+def grid_density(problem: ShootingProblem, points_per_substep: int = 8) -> int:
+    """Grid points per sub-step: ``points_per_substep``, or more when the plan has so few sub-steps
+    that the whole grid would hold fewer than :data:`MIN_GRID_POINTS`."""
+    return max(points_per_substep, -(-MIN_GRID_POINTS // (problem.intervals * problem.substeps)))
 
 
 class _StackedDOP853(DOP853):
@@ -139,8 +150,8 @@ def verify(
     phase_tf = np.repeat(durations, M)
     planned = problem.transcription.propagate(robot, nodes[:-1], controls, phase_tf, M, S, False).states
     ends = np.concatenate([planned[:, 1:S], nodes[1:, None]], axis=1)  # (N, S, 2 nv)
-    # The dense grid: points_per_substep points per sub-step, and the interval's end after its last.
-    grid_points = points_per_substep + 1
+    # The dense grid: points per sub-step (grid_density), and the interval's end after its last.
+    grid_points = grid_density(problem, points_per_substep) + 1
     end = np.empty((N * S, 2 * nv))
     dense = np.empty((N * S, grid_points, 2 * nv))
     seconds = np.empty((N, S, grid_points))
