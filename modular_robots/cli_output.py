@@ -45,7 +45,7 @@ def run_table(result, scenario, search: dict | None = None) -> str:
     best-first search's last ``search`` figures, how far each composition went)."""
     w = result.winner
     statuses = [c.status for c in result.candidates]
-    clear = sum(c.name.endswith(f"+{BoundaryPair.CLEAR}") for c in result.candidates)
+    clear = sum(c.boundary_pair == BoundaryPair.CLEAR for c in result.candidates)
     v = w.verification
     rows = [
         (
@@ -73,7 +73,8 @@ def run_table(result, scenario, search: dict | None = None) -> str:
         ),
         (
             "candidates",
-            f"{len(statuses)} optimised ({len(statuses) - clear} compositions, {clear} also from a clear pair): "
+            f"{len(statuses)} optimised ({len({c.composition for c in result.candidates})} compositions, {clear} also "
+            "from a clear pair): "
             f"{statuses.count('optimal')} optimal, "
             f"{statuses.count('pruned')} pruned, {statuses.count('failed')} failed"
             + (f", {stopped} stopped before their end" if (stopped := statuses.count("stopped")) else ""),

@@ -257,8 +257,8 @@ class _Search:
 
     def _counts(self, results: list[CandidateResult]) -> dict:
         """``result.json``'s ``counts``: step B's over the compositions it decided, then step C's."""
-        clear = sum(r.name.endswith(f"+{BoundaryPair.CLEAR}") for r in results)
-        return {**self.summary.counts(), **stage_counts(len(results) - clear, len(results)), **status_counts(results)}
+        compositions = len({r.composition for r in results})  # (labelled, so never-run ones too)
+        return {**self.summary.counts(), **stage_counts(compositions, len(results)), **status_counts(results)}
 
     def _best_cost(self) -> float:
         """The smallest verified cost so far (inf: none)."""
