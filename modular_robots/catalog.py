@@ -277,6 +277,12 @@ def _read_module(f: Fields) -> Module:
         f"expected at most {MAX_ID_LENGTH} letters, digits or '_' (an id is part of composition and URDF link "
         f"names), got {shorten(module_id)}",
     )
+    if not f.has("kind") and (f.has("bodies") or f.has("joints")):
+        raise f.fail(
+            "kind",
+            "missing required key; this module has bodies and joints, as in the general module model: "
+            "give the catalogue 'format: general' at its top level",
+        )
     kind = f.string("kind", choices=KINDS)
     movable: tuple[JointType, ...] = ("revolute", "prismatic")
     joint: JointType

@@ -537,3 +537,20 @@ def test_a_misspelt_required_key_is_named_beside_the_missing_one(tmp_path):
     with pytest.raises(ScenarioError) as error:
         load_scenario(path)
     assert str(error.value) == f"{path}:{top}: catalog: missing required key"
+
+
+def test_a_general_catalogue_without_its_format_is_told_to_give_it(tmp_path):
+    """A catalogue of bodies and joints (the general module model, as import-timor writes it)
+    without ``format: general`` was read as convention A and said only 'modules[0].kind: missing
+    required key'."""
+    text = (Path(PAPER_CATALOG).parent / "improv-4dof.yaml").read_text()
+    assert "\nformat: general\n" in text
+    path = tmp_path / "c.yaml"
+    path.write_text(text.replace("\nformat: general\n", "\n", 1))
+    with pytest.raises(
+        CatalogError,
+        match=r"modules\[0\]\.kind: missing required key; this module has bodies and "
+        r"joints, as in the general module model: give the catalogue 'format: general' at its top "
+        r"level$",
+    ):
+        load_catalog(path)
