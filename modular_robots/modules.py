@@ -287,6 +287,12 @@ def _body(f: Fields) -> Body:
     if mass > 0.0:
         f.check(
             "inertia",
+            f.has("inertia"),
+            f"missing: a body of mass {mass:g} kg needs its [ixx, iyy, izz, ixy, ixz, iyz] about the centre of mass "
+            "[kg m^2]",
+        )
+        f.check(
+            "inertia",
             _physical_inertia(inertia),
             "expected [ixx, iyy, izz, ixy, ixz, iyz] about the centre of mass, positive definite, no principal "
             f"moment above the sum of the other two, got {list(inertia)}",

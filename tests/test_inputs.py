@@ -554,3 +554,19 @@ def test_a_general_catalogue_without_its_format_is_told_to_give_it(tmp_path):
         r"level$",
     ):
         load_catalog(path)
+
+
+def test_a_body_with_mass_and_no_inertia_is_told_what_to_give(tmp_path):
+    """A general body of mass without ``inertia`` was refused as 'expected [...] positive definite,
+    got [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]', numbers the file does not have."""
+    text = (Path(PAPER_CATALOG).parent / "improv-4dof.yaml").read_text()
+    inertia = "    inertia:\n    - 0.004\n    - 0.0039\n    - 0.0006\n    - 0.0\n    - 0.0\n    - 0.0\n"
+    assert text.count(inertia) == 1
+    path = tmp_path / "c.yaml"
+    path.write_text(text.replace(inertia, "", 1))
+    with pytest.raises(CatalogError) as error:
+        load_catalog(path)
+    assert str(error.value).endswith(
+        ".inertia: missing: a body of mass 1.4 kg needs its [ixx, iyy, izz, ixy, ixz, iyz] about the centre of "
+        "mass [kg m^2]"
+    ), str(error.value)
