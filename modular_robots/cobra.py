@@ -8,7 +8,9 @@ how (``docs/formats.md``, "import-cobra"):
 * CoBRA's start is free. The first goal (``at`` or ``reach``) becomes the scenario's start, the
   robot at rest there; the other goals follow in order: ``at``, ``reach``, ``pause``, and
   ``returnTo`` (to ``returnToGoal``, the start when absent, null or naming the first goal; a
-  pause's ID stands for the goal the robot pauses at).
+  pause's ID stands for the goal the robot pauses at). An ``at`` goal that a ``returnTo`` names
+  becomes a ``reach``: CoBRA compares the joint state there with the return's, velocity and
+  acceleration included, and a return ends at rest.
 * A tolerated pose's ``r_sph`` (``[0, r]``) is the position tolerance, ``Theta_R`` (``[0, a]``)
   the angle tolerance about the nominal orientation; ``x``, ``y``, ``z`` bounds symmetric about 0
   give the ball inside them (stricter than the box: a plan within it meets the task). Any other
@@ -300,6 +302,10 @@ def _goals(goals: list, to_base: np.ndarray, where: str) -> tuple[list[dict], An
             back = first_id if named is None else str(named)
             _expect(back in seen, label, f"returnToGoal: no earlier goal with ID {shorten(back)}")
             back = where_paused.get(back, back)
+            passed = next((g for g in out if g.get("id") == back and "at" in g), None)
+            if passed is not None:  # CoBRA's returnTo compares the joint state, velocity included
+                passed["reach"] = passed.pop("at")
+                passed["id"] = passed.pop("id")
             out.append({"return": "start" if back == first_id else back, "id": gid})
         seen.add(gid)
     return out, start, first_id

@@ -409,6 +409,34 @@ def test_the_check_fails_a_solution_that_breaks_a_goal(solved):
         check_solution(task, early, result.urdf, result.drive["armature"])
 
 
+def test_a_return_to_an_at_goal_stops_there_and_meets_cobras_return(tmp_path):
+    """CoBRA's returnTo compares the joint state with the named goal's, velocity included: an
+    ``at`` goal a returnTo names becomes a ``reach``. Imported as an ``at``, the robot passed it at
+    1.19 rad/s and the return ended at rest: the solution failed the check ('4', 'returnTo')."""
+    (tmp_path / "tasks").mkdir()
+    goals = [
+        {"ID": "1", "type": "reach", "goalPose": _world_pose((0.45, 0.25, 0.25))},
+        {"ID": "w", "type": "at", "goalPose": {**_world_pose((0.2, 0.25, 0.45)), "tolerance": [[0, 0.03]]}},
+        {"ID": "2", "type": "reach", "goalPose": _world_pose((-0.25, 0.45, 0.35))},
+        {"ID": "4", "type": "returnTo", "returnToGoal": "w"},
+    ]
+    constraints = [{"type": "joint", "parts": ["q", "dq", "tau"]}, {"type": "basePlacement", "pose": {"nominal": BASE}}]
+    task = _task(goals, constraints=constraints)
+    path = tmp_path / "tasks" / "back.json"
+    path.write_text(json.dumps(task))
+    out = tmp_path / "back.yaml"
+    import_cobra(path, IMPROV_4DOF, out).write(out)
+    scenario = load_scenario(out)
+    assert [(g.id, g.kind) for g in scenario.task.goals] == [("w", "reach"), ("2", "reach"), ("4", "return")]
+    composition = Composition.from_name("base-PB21-L1-PB21-L3", scenario.catalog)
+    verdict = check_composition(composition, scenario.catalog, scenario.task)
+    assert verdict.passed, verdict.message
+    result = make_candidate(scenario, next(candidate_specs([verdict]))).solve()
+    assert result.verification is not None and result.verification.passed, (result.status, result.reason)
+    robot = robot_from_urdf(result.urdf, result.drive["armature"])
+    check_solution(task, cobra_solution(scenario, result, robot, 1.0), result.urdf, result.drive["armature"])
+
+
 def test_a_refused_import_leaves_the_folder_as_it_was(tmp_path):
     """The reader refuses the written scenario (a max_time shorter than the task's pauses): nothing
     of it stays, neither in a new folder nor over an earlier import, whose scenario and mesh are
