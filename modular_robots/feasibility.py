@@ -133,9 +133,10 @@ class Verdict:
     misses seen (``ik_error`` [m], ``torque_ratio``, ``clearance`` [m], ``reach_margin`` [m],
     ``workspace_excess`` [m]). For a passing composition, ``q_start``/``q_goal`` are the chosen
     boundary configurations and ``time_bound`` [s] their velocity-limited lower bound on motion
-    time; ``clear_pair`` is the fastest ``(q_start, q_goal)`` whose straight joint-space line
-    keeps 0.02 m from every obstacle when the chosen pair's does not, else None (step C
-    optimises from both, see :func:`_boundary_pair`).
+    time (for a task of several goals, through its poses, pauses included:
+    :func:`_boundary_chain`); ``clear_pair`` is the fastest ``(q_start, q_goal)`` whose straight
+    joint-space line keeps 0.02 m from every obstacle when the chosen pair's does not, else None
+    (step C optimises from both, see :func:`_boundary_pair`).
     """
 
     composition: Composition
@@ -524,11 +525,11 @@ def _feasible(cascade: _Cascade, task: Task) -> Verdict:
     built = cascade.built()
     robot, collision, figures = built.robot, built.collision(), cascade.figures
     if task.goals:
-        chain = _boundary_chain(robot, task, cascade.passing)
+        chain, time_bound = _boundary_chain(robot, task, cascade.passing)
         (q_start, q_goal), clear = (chain[0], chain[-1]), None
     else:
         (q_start, q_goal), clear = _boundary_pair(robot, collision, cascade.passing["start"], cascade.passing["goal"])
-        chain = [q_start, q_goal]
+        chain, time_bound = [q_start, q_goal], robot.travel_time_bound(q_start, q_goal)
     figures["torque_ratio"] = max(_torque_check(robot, q, "").figure for q in (q_start, q_goal))
     figures["clearance"] = min(collision.min_distance(q) for q in chain)
     return Verdict(
@@ -539,7 +540,7 @@ def _feasible(cascade: _Cascade, task: Task) -> Verdict:
         cascade.clock.seconds,
         tuple(map(float, q_start)),
         tuple(map(float, q_goal)),
-        robot.travel_time_bound(q_start, q_goal),
+        time_bound,
         (tuple(map(float, clear[0])), tuple(map(float, clear[1]))) if clear else None,
         tuple(tuple(map(float, q)) for q in chain[1:-1]),
     )
@@ -551,7 +552,7 @@ def _relaxed(cascade: _Cascade, task: Task) -> Verdict:
     the obstacles)."""
     robot = cascade.built().robot
     if task.goals:
-        chain = _boundary_chain(robot, task, cascade.passing)
+        chain, time_bound = _boundary_chain(robot, task, cascade.passing)
         q_start, q_goal = chain[0], chain[-1]
     else:
         starts, goals = np.array(cascade.passing["start"]), np.array(cascade.passing["goal"])
@@ -561,7 +562,7 @@ def _relaxed(cascade: _Cascade, task: Task) -> Verdict:
         times = np.max(moves, axis=2, initial=0.0)
         first = int(np.argmin(times))  # the first pair of least time, as min() over the pairs in order
         q_start, q_goal = starts[first // len(goals)], goals[first % len(goals)]
-        chain = [q_start, q_goal]
+        chain, time_bound = [q_start, q_goal], robot.travel_time_bound(q_start, q_goal)
     return Verdict(
         cascade.composition,
         None,
@@ -570,18 +571,25 @@ def _relaxed(cascade: _Cascade, task: Task) -> Verdict:
         cascade.clock.seconds,
         tuple(map(float, q_start)),
         tuple(map(float, q_goal)),
-        robot.travel_time_bound(q_start, q_goal),
+        time_bound,
         None,
         tuple(tuple(map(float, q)) for q in chain[1:-1]),
     )
 
 
-def _boundary_chain(robot: RobotModel, task: Task, passing: dict[str, list[np.ndarray]]) -> list[np.ndarray]:
+def _boundary_chain(
+    robot: RobotModel, task: Task, passing: dict[str, list[np.ndarray]]
+) -> tuple[list[np.ndarray], float]:
     """The configurations of a task of several goals at its start and at the end of each move
     (:func:`~modular_robots.goals.stops_of`): among the passing solutions at each pose, the chain
     of least summed ``max_i |dq_i| / qdot_max,i`` over the moves between poses (dynamic
     programming), a return taking the configuration it returns to. Step C starts from it; the
-    configurations of the goals between the start and the end are free there."""
+    configurations of the goals between the start and the end are free there.
+
+    With it, the time bound through the poses [s]: that least sum, plus the task's pauses. A
+    return adds nothing to it (a move back is at least 0 s, and a return between two poses is
+    bounded by the move between them, the bound being a norm's distance), so a cycle back to its
+    start keeps the bound of its way out."""
     labels = [label for label, _ in task.targets]
     options = [np.asarray(passing[label]) for label in labels]
     # Least total time to each option of pose k, and the option of pose k - 1 it came from.
@@ -601,7 +609,8 @@ def _boundary_chain(robot: RobotModel, task: Task, passing: dict[str, list[np.nd
     chain = [chosen[0]]
     for stop in stops:
         chain.append(chain[stop.returns_to] if stop.returns_to is not None else chosen[1 + pose_of[stop.goal]])
-    return chain
+    pauses = sum(goal.duration for goal in task.goals if goal.kind == "pause")
+    return chain, float(best.min()) + pauses
 
 
 @dataclass

@@ -382,8 +382,9 @@ class _Search:
 
     def _ik_bound(self, verdict: Verdict) -> float:
         """The stage-1 bound of a composition through the relaxed step B: for the objective's
-        time, the joint travel time of its fastest pair (:attr:`Verdict.time_bound`), less what
-        the clusters' members may differ by, within the limits verification allows (0 with free
+        time, the joint travel time of its fastest pair (:attr:`Verdict.time_bound`; through its
+        poses, pauses included, with several goals), less what the clusters' members may differ by
+        at each move's ends, within the limits verification allows (0 with free
         ends: step C then chooses its own ends); with the objective's costs of the design
         (:func:`~modular_robots.bounds.objective_bound`)."""
         objective, catalog = self.scenario.task.cost, self.scenario.catalog
@@ -391,7 +392,8 @@ class _Search:
         if objective.counts_time and not self.scenario.optimizer.free_ends and verdict.time_bound is not None:
             limits = [lever.velocity for lever in joint_levers(verdict.composition, catalog)]
             slowest = min((v for v in limits if 0.0 < v < math.inf), default=math.inf)
-            time = max(verdict.time_bound - 2 * _CLUSTER / slowest, 0.0) / (1.0 + LIMIT_TOLERANCE)
+            moves = len(verdict.q_via) + 1  # each move's ends may differ by a cluster's width
+            time = max(verdict.time_bound - 2 * moves * _CLUSTER / slowest, 0.0) / (1.0 + LIMIT_TOLERANCE)
         design = design_of(verdict.composition.modules, catalog) if objective.counts_design else None
         return objective_bound(objective, time, design)
 

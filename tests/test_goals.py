@@ -255,6 +255,17 @@ def _tool(robot, q):
     return np.array([robot.tool_position(x) for x in np.atleast_2d(q)])
 
 
+def test_step_bs_time_bound_of_a_cycle_is_its_way_out_and_its_pause_below_the_optimum(pause_candidate, solved_pause):
+    """A cycle back to its start ends where it began: its time bound was the joint travel between
+    two equal configurations, 0 s (``filter`` listed every survivor at 0.000). It is the way out
+    at the velocity limits, by hand, plus the pause, and the solved optimum is above it."""
+    _, verdict, _, candidate = pause_candidate
+    result, robot = solved_pause[2], candidate.problem.robot
+    out = np.abs(np.subtract(verdict.q_via[0], verdict.q_start)) / robot.velocity_limit
+    assert verdict.time_bound == pytest.approx(out.max() + 0.5, rel=1e-12) and out.max() > 0.5
+    assert result.status == "optimal" and verdict.time_bound < result.cost
+
+
 def test_a_pause_and_a_return_hold_on_the_sampled_plan(solved_pause):
     scenario, spec, result = solved_pause
     assert result.status == "optimal", result.reason
