@@ -191,6 +191,8 @@ def import_cobra(
     )
     constraints = data.get("constraints", [])
     _expect(isinstance(constraints, list), where, "constraints: expected a list")
+    for k, constraint in enumerate(constraints):
+        _expect(isinstance(constraint, dict), where, f"constraints[{k}]: expected an object, got {shorten(constraint)}")
     kinds = {str(c.get("type", "")).lower(): c for c in constraints if isinstance(c, dict)}
     for kind in kinds:
         _expect(
@@ -222,7 +224,8 @@ def import_cobra(
     to_base = np.linalg.inv(base)
     goals = data.get("goals", [])
     least = "expected at least two: a CoBRA task's start is free, so the first goal is the start"
-    _expect(isinstance(goals, list) and len(goals) > 0, where, f"goals: none; {least}")
+    _expect(isinstance(goals, list), where, f"goals: expected a list, got {type(goals).__name__}")
+    _expect(len(goals) > 0, where, f"goals: none; {least}")
     scenario_goals, start, first_id = _goals(goals, to_base, where)  # (each goal's type checked first)
     _expect(len(goals) >= 2, where, f"goals: one; {least}, and one goal leaves no motion to optimise")
     if "allgoalsfulfilledinorder" in kinds:
@@ -281,6 +284,11 @@ def _goals(goals: list, to_base: np.ndarray, where: str) -> tuple[list[dict], An
         _expect(isinstance(goal, dict), label, "expected an object")
         gid = str(goal.get("ID", i + 1))
         _expect(gid not in seen, label, f"the goal ID {shorten(gid)} is used twice")
+        _expect(
+            not goal.get("constraints"),
+            label,
+            f"(ID {shorten(gid)}) constraints: a goal's own constraints are not supported",
+        )
         kind = _GOAL_TYPES.get(str(goal.get("type", "")).lower())
         if kind is None:
             raise ScenarioError(
@@ -368,7 +376,14 @@ def _obstacles(data: dict, to_base: np.ndarray, task_path: Path, output: Path) -
     for i, obstacle in enumerate(items):
         label = f"{where}: obstacles[{i}]"
         _expect(isinstance(obstacle, dict), label, "expected an object")
-        for k, geometry in enumerate(obstacle.get("collision", [])):
+        geometries = obstacle.get("collision")
+        _expect(
+            isinstance(geometries, list),
+            label,
+            f"collision: expected a list of geometries (an obstacle without it would be left out), got "
+            f"{shorten(geometries)}",
+        )
+        for k, geometry in enumerate(geometries):
             part = f"{label}.collision[{k}]"
             _expect(isinstance(geometry, dict), part, "expected an object")
             pose = to_base @ _matrix(geometry.get("pose", np.eye(4).tolist()), f"{part}: pose")

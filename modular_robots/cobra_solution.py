@@ -106,6 +106,7 @@ def cobra_solution(scenario: Scenario, result: CandidateResult, robot: RobotMode
         ddq[rows] = 0.0
     q = np.clip(q, robot.lower, robot.upper)
     tau = robot.rnea(q, dq, ddq)
+    payload = scenario.task.payload
     modules = result.composition.split("-")
     catalog = scenario.catalog
     by_id = {m.id: m for m in catalog.modules}
@@ -126,7 +127,8 @@ def cobra_solution(scenario: Scenario, result: CandidateResult, robot: RobotMode
         "date": datetime.date.today().strftime("%Y-%m-%d"),
         "computationTime": float(seconds),
         "processorName": platform.processor() or platform.machine(),
-        "notes": f"modular-robots: {result.composition} ({len(modules)} modules, {robot.nv} joints)",
+        "notes": f"modular-robots: {result.composition} ({len(modules)} modules, {robot.nv} joints)"
+        + (f"; tau holds a payload of {payload:g} kg at tool0 (CoBRA's task has none)" if payload > 0 else ""),
         "tags": [""],
         "moduleSet": source.group(1).split("/")[-1] if source else catalog.name,
         "moduleOrder": [match.group(1) if match else m for m, match in zip(modules, timor_ids)],

@@ -152,6 +152,18 @@ def _pose(x, y, z, r=0.01):
             "is not a file inside the task's folder",
         ),
         (lambda t: t["constraints"].append({"type": "endEffector"}), "the constraint 'endeffector' is not supported"),
+        # silently dropped before: a goal's own constraints, a constraint that is a string, an
+        # obstacle without its collision list; goals given as an object were 'goals: none'
+        (
+            lambda t: t["goals"][1].update(constraints=[{"type": "joint", "parts": ["q"]}]),
+            "goals[1]: (ID '2') constraints: a goal's own constraints are not supported",
+        ),
+        (lambda t: t["constraints"].append("joint"), "constraints[3]: expected an object, got 'joint'"),
+        (
+            lambda t: t["obstacles"].append({"name": "o", "ID": "o", "visual": []}),
+            "obstacles[0]: collision: expected a list of geometries",
+        ),
+        (lambda t: t.update(goals={"1": t["goals"][0]}), "goals: expected a list, got dict"),
     ],
 )
 def test_bad_tasks_are_refused_naming_the_item(tmp_path, change, words):
@@ -337,6 +349,7 @@ def solved(tmp_path_factory):
 def test_a_solution_meets_every_goal_and_constraint_at_its_rows(solved):
     task, _, result, document = solved
     assert document["taskID"] == "test/t" and document["costFunction"] == "cyc"
+    assert document["notes"].endswith("; tau holds a payload of 1 kg at tool0 (CoBRA's task has none)")
     assert document["moduleOrder"] == ["1", "21", "4", "23", "6", "12"]  # Timor's ids of base PB21 L1 PB23 L4 L3
     assert document["moduleSet"] == "IMPROV"
     t = np.array(document["trajectory"]["t"])
