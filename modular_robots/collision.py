@@ -197,7 +197,7 @@ class CollisionModel:
         ``j``: the obstacle's closed form
         (:meth:`~modular_robots.obstacles.Obstacle.signed_distance`) for a shape that has one
         everywhere, else FCL's while they are apart and the closed form when FCL reports an
-        overlap."""
+        overlap (a shape without one there: FCL's contact, :func:`_penetration`)."""
         obstacle = self.obstacles[j]
         if obstacle.closed_form:
             exact = obstacle.signed_distance(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i])
@@ -208,10 +208,12 @@ class CollisionModel:
         inside = None
         if d < 0.0:
             inside = obstacle.signed_distance(mid, rot[:, 2], self._prim_lengths[i], self._prim_radii[i])
-        if inside is None:  # NumPy arrays, made anew on each read of the property
-            on_robot, on_obstacle = result.nearest_points
-            return d, on_robot, on_obstacle, None
-        return inside
+        if inside is not None:
+            return inside
+        if d < 0.0:  # FCL's distance is -1 on any overlap: no depth, no witness points
+            return _penetration(self._robot_objects[i], self._obstacle_objects[j])
+        on_robot, on_obstacle = result.nearest_points  # NumPy arrays, made anew on each read
+        return d, on_robot, on_obstacle, None
 
     def closest(self, q: np.ndarray, derivatives: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """For each obstacle, the signed distance [m] to the closest primitive, ``(n_obstacles,)``,
@@ -521,3 +523,24 @@ def _place(obj: fcl.CollisionObject, rot: np.ndarray, translation: np.ndarray) -
 
 #: FCL only reads a request, so one serves every query.
 _NEAREST_POINTS = fcl.DistanceRequest(enable_nearest_points=True)
+_CONTACT = fcl.CollisionRequest(num_max_contacts=1, enable_contact=True)
+
+
+def _penetration(robot: fcl.CollisionObject, obstacle: fcl.CollisionObject) -> Witness:
+    """The signed distance of overlapping FCL objects, minus FCL's penetration depth, and
+    witness points on its contact line (the robot's one the depth away from the obstacle's,
+    against the contact normal, so that ``on_robot - on_obstacle`` points where the distance
+    grows, as it does for shapes apart)."""
+    result = fcl.CollisionResult()
+    fcl.collide(robot, obstacle, _CONTACT, result)
+    if not result.contacts:  # touching, by FCL's distance and not by its collision test: apart
+        return (
+            0.0,
+            np.array(robot.getTranslation(), dtype=float),
+            np.array(obstacle.getTranslation(), dtype=float),
+            None,
+        )
+    contact = result.contacts[0]
+    normal, depth = np.asarray(contact.normal, dtype=float), float(contact.penetration_depth)
+    middle = np.asarray(contact.pos, dtype=float)
+    return -depth, middle - 0.5 * depth * normal, middle + 0.5 * depth * normal, None

@@ -52,6 +52,37 @@ def test_obstacles_of_two_shape_classes_measure_as_one_batch_of_spheres():
         assert mixed.path_clear(path, clearance) == plain.path_clear(path, clearance)
 
 
+class FclBall(SphereObstacle):
+    """A shape as docs/extending.md allows one without a closed form: FCL measures it, apart and
+    overlapping, and its normals are the convex shape's ``on_robot - on_obstacle``."""
+
+    kind: ClassVar[str] = "fcl_ball"
+    closed_form: ClassVar[bool] = False
+
+    def signed_distance(self, mid, axis, length, radius):
+        return None
+
+    @classmethod
+    def normals(cls, batch, on_robot, on_obstacle):
+        return on_robot - on_obstacle
+
+
+def test_a_shape_fcl_measures_gives_the_closed_forms_distances_and_gradients_inside_too():
+    """FCL's distance is -1 on any overlap, with no witness points: passed on, the clearance was
+    -1 m and its gradient NaN (a step C crash, 'array must not contain infs or NaNs'). Inside, the
+    depth and contact of FCL's collision test give the sphere's closed form."""
+    robot = planar_arm()
+    spec = [((1.3, 0.9, 0.0), 0.2), ((-0.4, 1.5, 0.1), 0.3), ((0.9, -1.2, 0.0), 0.25)]
+    exact = CollisionModel(robot, [SphereObstacle(c, r) for c, r in spec])
+    fcl_model = CollisionModel(robot, [FclBall(c, r) for c, r in spec])
+    qs = np.random.default_rng(5).uniform(-2.5, 2.5, (200, 2))
+    d_exact, g_exact = exact.closest_many(qs, derivatives=True)
+    d_fcl, g_fcl = fcl_model.closest_many(qs, derivatives=True)
+    assert (d_exact < -0.01).sum() >= 5 and (d_exact > 0.01).sum() >= 5
+    np.testing.assert_allclose(d_fcl, d_exact, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(g_fcl, g_exact, rtol=0, atol=1e-9)
+
+
 def test_a_registered_shape_is_read_from_a_scenario_and_round_trips_through_json(tmp_path, monkeypatch):
     monkeypatch.setitem(obstacle_shapes.SHAPES, "ball", Ball)
     text = PAPER_5KG.read_text()

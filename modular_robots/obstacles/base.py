@@ -102,7 +102,8 @@ class Obstacle(Protocol):
 
     def signed_distance(self, mid: np.ndarray, axis: np.ndarray, length: float, radius: float) -> Witness | None:
         """Signed distance and witness points of a capsule (axis midpoint ``mid``, unit ``axis``,
-        ``length``, ``radius``) in closed form, or None to keep FCL's answer. Asked for every
+        ``length``, ``radius``) in closed form, or None to keep FCL's answer (overlapping: FCL's
+        contact, :func:`~modular_robots.collision._penetration`). Asked for every
         pair of a :attr:`closed_form` shape, else only where FCL reports an overlap (FCL's signed
         distance can abort near contact: see :func:`~modular_robots.obstacles.sphere.capsule_sphere`)."""
         ...
@@ -120,8 +121,8 @@ class Obstacle(Protocol):
         robot's witness point ``on_robot`` moves; witness points ``(K, O, 3)`` of the obstacles
         of ``batch``. Used where a distance came without its gradient (FCL's, or a
         :meth:`signed_distance` that gave None). Right inside the shape too: where
-        :meth:`signed_distance` returns None, the witness points are FCL's, and
-        ``on_robot - on_obstacle`` points the wrong way there."""
+        :meth:`signed_distance` returns None, the witness points are FCL's contact's, on which
+        ``on_robot - on_obstacle`` points where the distance grows."""
         ...
 
     def page(self, grow: float = 0.0) -> list[dict[str, Any]]:
