@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from .bounds import JOINT_TRAVEL
@@ -114,11 +115,16 @@ class Ledger:
     candidates end differently takes the first of: solved, unexplored, ratio-pruned, excluded by
     a bound)."""
 
-    def __init__(self, space: int, band: float = 1.0):
+    def __init__(self, space: int, limit: Callable[[float], float] | None = None, bound_name: str = JOINT_TRAVEL):
         self.space = space
-        #: A composition can win only when its bound is below the best cost times this (1 + the
-        #: tie band of a lexicographic objective, :attr:`~modular_robots.costs.Objective.band`).
-        self.band = band
+        #: A composition can win only when its bound is below this of the best cost
+        #: (:meth:`~modular_robots.costs.Objective.limit`: the best times a lexicographic
+        #: objective's tie band, equal bounds too where tie-breaks decide ties); the best itself
+        #: when not given.
+        self.limit = limit if limit is not None else float
+        #: The name of a candidate's own bound (:data:`~modular_robots.bounds.JOINT_TRAVEL`, or
+        #: :data:`~modular_robots.bounds.DESIGN` for an objective of the design's costs alone).
+        self.bound_name = bound_name
         self.classes: dict[str, str] = {}
         self.verified: set[str] = set()
         self.open: list[float] = []  # bounds of what may still be better: failed, ratio-pruned, unexplored
@@ -158,7 +164,7 @@ class Ledger:
             self.open.append(bound)
             self.uncertain.append(bound)
         elif result.pruned_by_bound:
-            self._set(composition, f"bound:{JOINT_TRAVEL}")
+            self._set(composition, f"bound:{self.bound_name}")
         elif result.status == CandidateStatus.PRUNED:  # by the ratio rule
             self._set(composition, _RATIO)
             self.open.append(bound)
@@ -168,7 +174,7 @@ class Ledger:
 
     def left(self, composition: str, bound: float, name: str, best: float) -> None:
         """A composition (or one of its candidates) still in the frontier when the search ended."""
-        if bound >= best * self.band * (1.0 - _EQUAL):
+        if self._excluded(bound, best):
             self._set(composition, f"bound:{name}")
         else:
             self._set(composition, _UNEXPLORED)
@@ -176,11 +182,15 @@ class Ledger:
 
     def beyond(self, count: int, smallest: float, name: str, best: float) -> None:
         """``count`` compositions never taken into the frontier, their smallest bound ``smallest``."""
-        if smallest >= best * self.band * (1.0 - _EQUAL):
+        if self._excluded(smallest, best):
             self.extra[f"bound:{name}"] += count
         else:
             self.extra["unexplored"] += count
             self._still_open(smallest)
+
+    def _excluded(self, bound: float, best: float) -> bool:
+        """Whether a composition of this bound cannot win against the verified ``best``."""
+        return bound >= self.limit(best) * (1.0 - _EQUAL)
 
     def _still_open(self, bound: float) -> None:
         """An unexplored composition's bound: it may still hide a better one."""
@@ -194,7 +204,7 @@ class Ledger:
         counts = Counter(self.classes.values()) + self.extra
         reference = cost if best is None else best
         open_bound = min(self.open) if self.open else None
-        certified = winner is not None and all(b >= reference * self.band * (1.0 - _EQUAL) for b in self.uncertain)
+        certified = winner is not None and all(self._excluded(b, reference) for b in self.uncertain)
         gap = None
         if winner is not None and open_bound is not None and open_bound < reference:
             gap = reference / open_bound if open_bound > 0 else math.inf

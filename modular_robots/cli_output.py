@@ -95,7 +95,7 @@ def _tie_break_row(result, scenario) -> list[tuple[str, str]]:
         return []
     verified = [c for c in result.candidates if c.status == "optimal"]
     best = min(c.cost for c in verified)
-    tied = [c for c in verified if c.cost <= best * objective.band]
+    tied = [c for c in verified if c.cost <= objective.limit(best)]  # (equal to 12 digits, as ranked)
 
     design = result_design(result.winner, scenario)
     values = ", ".join(_with_unit(name, COSTS[name].value(design)) for name in objective.then)  # type: ignore[attr-defined]

@@ -20,9 +20,11 @@ from typing import cast
 
 import numpy as np
 
+from .bounds import DESIGN, JOINT_TRAVEL
 from .certificate import Certificate, Ledger
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
+from .costs import Objective
 from .exceptions import CompositionError, InfeasibleError, Terminated, shorten
 from .execution import make_engine, make_executor, single_threaded_blas
 from .feasibility import (
@@ -242,7 +244,7 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
             reasons = "; ".join(f"{r.name}: {r.reason}" for r in results[:3])
             recorder.finish("failed", f"every candidate failed ({reasons})")
             raise InfeasibleError(f"no candidate converged to a verified trajectory ({reasons})")
-        certificate = exhaustive_certificate(summary, results, bounds, winner, scenario.task.cost.band)
+        certificate = exhaustive_certificate(summary, results, bounds, winner, scenario.task.cost)
         recorder.update(search={"kind": "all", "certificate": certificate.to_json()})
         recorder.record_winner(
             winner,
@@ -259,13 +261,16 @@ def exhaustive_certificate(
     results: Iterable[CandidateResult],
     bounds: dict[str, float],
     winner: CandidateResult,
-    band: float = 1.0,
+    objective: Objective | None = None,
 ) -> Certificate:
     """The certificate of a run that put every composition through step B: each removed by its
-    test, each of the others by its candidates' ends (:class:`~modular_robots.certificate.Ledger`;
-    ``band``: :attr:`~modular_robots.costs.Objective.band`)."""
+    test, each of the others by its candidates' ends (:class:`~modular_robots.certificate.Ledger`,
+    with ``objective``'s :meth:`~modular_robots.costs.Objective.limit` and bound name)."""
     results = list(results)
-    ledger = Ledger(summary.checked, band)
+    if objective is None:
+        ledger = Ledger(summary.checked)
+    else:
+        ledger = Ledger(summary.checked, objective.limit, JOINT_TRAVEL if objective.counts_time else DESIGN)
     for test, count in summary.removed.items():
         ledger.removed_many(test, count)
     for result in results:

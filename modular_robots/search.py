@@ -171,7 +171,8 @@ class _Search:
         self.tolerance = feasibility.tolerance
         #: A composition has a chance only when its bound is below the best cost times this.
         self.band = scenario.task.cost.band
-        self.ledger = Ledger(self.space, self.band)
+        objective = scenario.task.cost
+        self.ledger = Ledger(self.space, objective.limit, JOINT_TRAVEL if objective.counts_time else DESIGN)
         self.summary = FeasibilitySummary()
         self.results: dict[str, CandidateResult] = {}
         self.specs: dict[str, CandidateSpec] = {}
@@ -266,8 +267,9 @@ class _Search:
 
     def _limit(self) -> float:
         """The bound below which a composition may still win: the best cost, times a
-        lexicographic objective's tie band (:attr:`~modular_robots.costs.Objective.band`)."""
-        return self._best_cost() * self.band
+        lexicographic objective's tie band, a tie included where tie-breaks decide ties
+        (:meth:`~modular_robots.costs.Objective.limit`)."""
+        return self.scenario.task.cost.limit(self._best_cost())
 
     def _lowest(self) -> float | None:
         """The smallest bound left (None: nothing is left)."""

@@ -379,7 +379,9 @@ def test_the_continuation_solves_a_rounder_energy_first_in_a_sum_too():
 
 # -- the search and the bounds with the new objectives ---------------------------------------------
 @pytest.mark.parametrize(
-    "cost", ["time + 0.2*mass", "time then modules, mass within 0.2"], ids=["weighted-sum", "lexicographic"]
+    "cost",
+    ["time + 0.2*mass", "time then modules, mass within 0.2", "joints then mass within 0"],
+    ids=["weighted-sum", "lexicographic", "tied-design"],
 )
 def test_the_best_first_search_certifies_the_exhaustive_winner_of_a_sum_and_an_order(cost, tmp_path):
     scenario = load_scenario(ROOT / "tests" / "data" / "small-fast.yaml")

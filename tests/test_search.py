@@ -16,6 +16,7 @@ import json
 import math
 import random
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from threadpoolctl import threadpool_info, threadpool_limits
@@ -23,10 +24,12 @@ from threadpoolctl import threadpool_info, threadpool_limits
 import modular_robots.search as search_module
 from modular_robots import frontier as frontier_module
 from modular_robots import load_scenario
+from modular_robots.bounds import DESIGN, JOINT_TRAVEL
 from modular_robots.certificate import Ledger
 from modular_robots.cli import main
 from modular_robots.cli_output import run_table
 from modular_robots.composition import Composition
+from modular_robots.costs import parse_objective
 from modular_robots.exceptions import InfeasibleError, InputError
 from modular_robots.feasibility import check_composition
 from modular_robots.pipeline import candidate_specs, run_scenario
@@ -294,6 +297,31 @@ def test_the_certificate_tells_a_bound_from_the_ratio_rule_and_writes_an_unbound
     document = json.loads(json.dumps(certificate.to_json(), allow_nan=False))
     assert document["gap"] is None and document["gap_unbounded"] is True
     assert "gap unbounded" in certificate.line()
+
+
+@pytest.mark.parametrize(
+    "text", ["joints then price within 0", "time then modules within 0.2", "time + 0.2*mass", "mass"]
+)
+def test_a_composition_the_ranking_would_tie_with_the_best_is_not_excluded_by_its_bound(text):
+    """The ranking puts a robot whose cost equals the best times the band (to 12 digits) in the
+    tie group, where the design decides; the search and its certificate excluded a composition
+    whose bound was equal (``>=``): with ``joints then price within 0`` on four-joint robots the
+    search certified a robot of price 111 where the exhaustive run found one of 63. Every bound
+    the ranking may still let win is kept, and without tie-breaks a tie is as good as the best."""
+    objective = parse_objective(text)
+    ledger = Ledger(1, objective.limit, JOINT_TRAVEL if objective.counts_time else DESIGN)
+    rng = np.random.default_rng(3)
+    for best in [4.0, 3.0, 0.5927, *rng.uniform(0.1, 10.0, 50)]:
+        edge = best * objective.band
+        for bound in (edge, edge * (1 + 1e-13), np.nextafter(edge, 0.0), edge * 1.01, edge * 0.99):
+            ties = bool(objective.then) and bound <= edge * (1 + 1e-12)
+            if bound < edge * (1 - 1e-9) or ties:
+                assert not ledger._excluded(bound, best), (best, bound)
+            elif bound > edge * (1 + 1e-9):
+                assert ledger._excluded(bound, best), (best, bound)
+    ledger.left("four-joint", 4.0, "design", 4.0)
+    certificate = ledger.certificate("other", 4.0, "exhausted")
+    assert certificate.certified == (not objective.then)
 
 
 def test_the_ledger_counts_as_settled_only_what_has_a_class_other_than_unexplored():

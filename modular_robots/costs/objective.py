@@ -124,6 +124,12 @@ class Objective:
         best cost times this."""
         return 1.0 + self.within
 
+    def limit(self, best: float) -> float:
+        """A robot whose bound on the sum is below this may still win against a verified ``best``:
+        the best times :attr:`band`; with tie-breaks a bound equal to it too (:meth:`rank` counts
+        costs equal to 12 digits as tied, and the design decides among them)."""
+        return best * self.band * (1.0 + 2.0 * EQUAL if self.then else 1.0)
+
     def rank(self, items: Iterable[T], cost: Callable[[T], float], design: Callable[[T], Design], name=str) -> list[T]:
         """``items`` (verified results) best first: by the sum; with tie-breaks, those within the
         band of the best by the ``then`` costs of their design, in order, then by the sum; ties
