@@ -387,6 +387,19 @@ class Fields:
             raise self.fail(key, f"expected {size} numbers, got {got}")
         return tuple(self._check_number(key, v, None, None, f"item {i}: ") for i, v in enumerate(value))
 
+    def rpy(self, key: str = "rpy", default: Any = _MISSING) -> tuple[float, float, float]:
+        """Roll, pitch and yaw [rad]: three numbers, none more than a turn either way (a larger
+        one is degrees in all likelihood, and says so)."""
+        angles = self.vector(key, 3, default)
+        if any(abs(a) > 2.0 * math.pi for a in angles):
+            radians = ", ".join(f"{math.radians(a):.4g}" for a in angles)
+            raise self.fail(
+                key,
+                f"{[float(a) for a in angles]} rad is more than a turn: degrees? Expected radians ([{radians}] rad "
+                "if they are degrees)",
+            )
+        return angles
+
     def interval(self, key: str, default: Any = _MISSING) -> tuple[float, float]:
         """A ``[low, high]`` pair with low <= high."""
         low, high = self.vector(key, 2, default)

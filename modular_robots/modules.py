@@ -265,7 +265,7 @@ def _pose(f: Fields, key: str) -> Pose:
     if sub is None:
         return Pose()
     xyz = sub.vector("xyz", 3, IDENTITY_XYZ)
-    rpy = sub.vector("rpy", 3, IDENTITY_XYZ)
+    rpy = sub.rpy(default=IDENTITY_XYZ)
     sub.done()
     return Pose(xyz, rpy)
 

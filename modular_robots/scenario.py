@@ -516,7 +516,7 @@ def _read_end(f: Fields, key: str) -> tuple[tuple[float, float, float], Orientat
     position = end.vector("position", 3)
     for optional in ("rpy", "axis"):  # known keys, for the message of an unknown one
         end.raw(optional, None)
-    rpy = end.vector("rpy", 3) if end.has("rpy") else None
+    rpy = end.rpy() if end.has("rpy") else None
     axis = end.vector("axis", 3) if end.has("axis") else None
     if rpy is not None and axis is not None:
         raise end.fail("axis", "give rpy (the whole orientation) or axis (the tool's z axis), not both")

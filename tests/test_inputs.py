@@ -361,6 +361,13 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
             "catalog: no catalogue file at {dir}/catalogs/missing.yaml (looked in {dir}/catalogs: a relative path "
             "is taken from the scenario's folder)",
         ),
+        (
+            "- sphere: {center: [1.5, -1.3, 1.1], radius: 0.30}",
+            "- box: {center: [1.5, -1.3, 1.1], size: [0.2, 0.2, 0.2], rpy: [0, 0, 45]}",
+            "- box:",
+            "task.obstacles[0].box.rpy: [0.0, 0.0, 45.0] rad is more than a turn: degrees? Expected radians "
+            "([0, 0, 0.7854] rad if they are degrees)",
+        ),
     ],
     ids=[
         "nan-target",
@@ -381,6 +388,7 @@ def _scenario(tmp_path: Path, old: str, new: str) -> Path:
         "obstacle-contains-base",
         "obstacle-contains-start",
         "missing-catalog",
+        "box-rpy-in-degrees",
     ],
 )
 def test_scenario_errors_name_file_line_key(tmp_path, old, new, needle, message):

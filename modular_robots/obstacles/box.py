@@ -55,7 +55,7 @@ class BoxObstacle:
         center = f.vector("center", 3)
         size = f.vector("size", 3)
         f.check("size", all(s > 0.0 for s in size), f"expected three side lengths > 0 [m], got {list(size)}")
-        rpy = f.vector("rpy", 3, default=(0.0, 0.0, 0.0))
+        rpy = f.rpy(default=(0.0, 0.0, 0.0))
         f.done()
         return cls(center, size, rpy)
 

@@ -53,7 +53,7 @@ class CylinderObstacle:
         center = f.vector("center", 3)
         radius = f.number("radius", exclusive_minimum=0.0)
         length = f.number("length", exclusive_minimum=0.0)
-        rpy = f.vector("rpy", 3, default=(0.0, 0.0, 0.0))
+        rpy = f.rpy(default=(0.0, 0.0, 0.0))
         f.done()
         return cls(center, radius, length, rpy)
 

@@ -119,7 +119,7 @@ class MeshObstacle:
             raise f.fail("file", str(e)) from None
         scale = f.number("scale", 1.0, exclusive_minimum=0.0)
         position = f.vector("position", 3, default=(0.0, 0.0, 0.0))
-        rpy = f.vector("rpy", 3, default=(0.0, 0.0, 0.0))
+        rpy = f.rpy(default=(0.0, 0.0, 0.0))
         f.done()
         if not np.any(_areas(scale * triangles) > 0.0):
             raise f.fail("file", f"{path}: every triangle has zero area at scale {scale:g}")
