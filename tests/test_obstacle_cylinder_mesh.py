@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import itertools
 import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from modular_robots.collision import CollisionModel
-from modular_robots.exceptions import ScenarioError
+from modular_robots.exceptions import InputWarning, ScenarioError
 from modular_robots.obstacles import (
     BoxObstacle,
     CylinderObstacle,
@@ -383,11 +384,30 @@ def test_bad_mesh_input_is_refused_with_its_file_line_and_key(tmp_path):
         load_scenario(path)
 
 
-def test_the_cell_mesh_scenario_reads_its_mesh():
-    scenario = load_scenario(ROOT / "scenarios" / "cell-mesh.yaml")
+def test_the_cell_mesh_scenario_reads_its_mesh(tmp_path):
+    """Read without a warning; its mesh, in millimetres, without its ``scale: 0.001`` would be
+    kilometres across, out of every robot's reach, and is warned about (it was taken silently)."""
+    path = ROOT / "scenarios" / "cell-mesh.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scenario = load_scenario(path)
     (machine,) = scenario.task.obstacles
     assert isinstance(machine, MeshObstacle) and machine.file == str(MACHINE_FILE.resolve())
     assert machine.describe().startswith("QUASER_MV205_v3_compressed.stl (748 triangles), scale 0.001")
+    text = path.read_text()
+    assert text.count(", scale: 0.001") == 1 and "file: meshes/" in text
+    unscaled = tmp_path / "cell.yaml"
+    unscaled.write_text(
+        text.replace(", scale: 0.001", "")
+        .replace("file: meshes/", f"file: {MACHINE_FILE.parent}/")
+        .replace("catalog: catalogs/", f"catalog: {ROOT / 'scenarios' / 'catalogs'}/")
+    )
+    with pytest.warns(
+        InputWarning,
+        match=r"mesh.file: the mesh is 6002 m across at scale 1: millimetres\? "
+        r"\(scale: 0.001 makes it 6.002 m\)$",
+    ):
+        load_scenario(unscaled)
 
 
 # -- a motion round each shape ----------------------------------------------------------------------

@@ -56,6 +56,8 @@ if TYPE_CHECKING:
 
 __all__ = ["MeshObstacle", "SURFACE_SAMPLES"]
 
+#: A mesh larger than this across [m] is warned about: a file in millimetres without its scale.
+LARGEST_EXPECTED = 100.0
 #: Surface points (mesh vertices) whose distance bounds a capsule's from above (capsule_bounds).
 SURFACE_SAMPLES = 64
 #: Points along a capsule's axis sampled for its deepest point, and the golden-section steps that
@@ -123,6 +125,14 @@ class MeshObstacle:
         f.done()
         if not np.any(_areas(scale * triangles) > 0.0):
             raise f.fail("file", f"{path}: every triangle has zero area at scale {scale:g}")
+        vertices = triangles.reshape(-1, 3)
+        extent = scale * float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+        if extent > LARGEST_EXPECTED:
+            f.warn(
+                "file",
+                f"the mesh is {extent:.4g} m across at scale {scale:g}: millimetres? (scale: {scale / 1000:g} makes it "
+                f"{extent / 1000:.4g} m)",
+            )
         return cls(str(path), scale, position, rpy, sha256)
 
     @classmethod
