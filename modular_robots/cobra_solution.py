@@ -57,7 +57,7 @@ def sample_times(events: list[float], step: float) -> np.ndarray:
             merged.append(e)
     rows = [np.array([merged[0]])]
     for a, b in itertools.pairwise(merged):
-        count = max(1, math.ceil((b - a) / step - 1e-9))
+        count = max(1, math.ceil((b - a) / step))
         rows.append(np.linspace(a, b, count + 1)[1:])
     return np.concatenate(rows)
 

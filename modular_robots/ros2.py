@@ -8,7 +8,7 @@ position, velocity and effort command and state interfaces per movable joint, th
 starting at the plan's first configuration, the
 ``mock_components/GenericSystem`` plugin), ``config/controllers.yaml`` (the controller manager
 at the controller rate, ``joint_state_broadcaster`` and ``joint_trajectory_controller`` with
-position commands), ``config/goal.yaml`` and ``goal.json`` (a ``control_msgs/FollowJointTrajectory``
+position commands), ``config/goal.yaml`` and ``config/goal.json`` (a ``control_msgs/FollowJointTrajectory``
 goal: the plan's positions, velocities and accelerations at the goal's rate; the torques are in
 ``export``'s ``trajectory_<rate>hz.json``: the controller refuses an ``effort`` field without an
 effort command interface), ``config/view.rviz``, ``launch/play.launch.py`` and ``README.md`` with

@@ -299,6 +299,11 @@ def test_sample_times_keep_every_event_and_the_step():
     t = sample_times([0.0, 0.0301, 0.5, 0.5000000001, 1.0], 0.01)
     assert t[0] == 0.0 and t[-1] == 1.0 and np.any(np.isclose(t, 0.0301, rtol=0, atol=1e-15))
     assert np.diff(t).max() <= 0.01 + 1e-12 and np.diff(t).min() > 1e-6
+    # rows at most the step apart to the last ulp (a stretch a hair over 61 steps was cut into 61,
+    # 0.010000000000000231 s apart), and an exact multiple of the step is not cut finer
+    long = sample_times([0.0, 0.6100000000002, 2.5], 0.01)
+    assert np.diff(long).max() <= 0.01 * (1 + 4e-16), np.diff(long).max()
+    assert len(sample_times([0.0, 1.0], 0.01)) == 101
 
 
 # --------------------------------------------------------------------------------------------
