@@ -349,6 +349,13 @@ def _read_task(f: Fields) -> Task:
             "the payload without doing work), and step C would crawl toward an ever longer move; add "
             "task.max_time [s], or add the time to the sum (e.g. time + 0.01*energy)",
         )
+    if max_time is None and cost.design_only:
+        f.warn(
+            "cost",
+            f"{cost} counts the design alone: every plan of a robot costs the same, and its duration is "
+            "whatever the solver stops at; add the time to the sum (e.g. mass + 0.01*time) or a "
+            "task.max_time [s]",
+        )
     paused = math.fsum(g.duration for g in goals)
     if max_time is not None and paused >= max_time:
         raise f.fail("max_time", f"the pauses take {paused:g} s, at least max_time = {max_time:g} s; expected more")

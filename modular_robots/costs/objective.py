@@ -118,6 +118,12 @@ class Objective:
         return any(isinstance(costs[name], DesignCost) for name, _ in self.terms)
 
     @property
+    def design_only(self) -> bool:
+        """Whether the sum counts costs of the design alone (the motion's duration is then free)."""
+        costs = _costs()
+        return all(isinstance(costs[name], DesignCost) for name, _ in self.terms)
+
+    @property
     def band(self) -> float:
         """``1 + within``: a robot whose first cost exceeds the best's by this factor cannot win
         (1 without tie-breaks). The safe bound rules of pruning and search compare against the
