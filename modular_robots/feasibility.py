@@ -586,10 +586,11 @@ def _boundary_chain(
     programming), a return taking the configuration it returns to. Step C starts from it; the
     configurations of the goals between the start and the end are free there.
 
-    With it, the time bound through the poses [s]: that least sum, plus the task's pauses. A
-    return adds nothing to it (a move back is at least 0 s, and a return between two poses is
-    bounded by the move between them, the bound being a norm's distance), so a cycle back to its
-    start keeps the bound of its way out."""
+    With it, the time bound through the poses' kept solutions [s]: that least sum, plus the task's
+    pauses (``filter``'s order of the survivors; step C frees the configurations between the
+    first and the last, so the search bounds by those two alone). A return adds nothing to it (a
+    move back is at least 0 s, and a return between two poses is bounded by the move between
+    them, the bound being a norm's distance), so a cycle back to its start keeps its way out."""
     labels = [label for label, _ in task.targets]
     options = [np.asarray(passing[label]) for label in labels]
     # Least total time to each option of pose k, and the option of pose k - 1 it came from.

@@ -46,6 +46,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO
 
+import numpy as np
+
 from .bounds import DESIGN, IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, joint_levers, objective_bound
 from .certificate import Certificate, Ledger
 from .composition import Composition
@@ -370,7 +372,7 @@ class _Search:
                 self.summary.add(verdict)
                 self.ledger.removed(item.composition.name, verdict.failed_test or "")
             elif item.kind == _UNCHECKED:
-                bound = max(item.bound, self._ik_bound(verdict))
+                bound = max(item.bound, ik_bound(self.scenario, verdict))
                 heapq.heappush(
                     self.queues[_RELAXED], _Item(bound, (bound, *item.order[1:]), _RELAXED, item.composition)
                 )
@@ -381,23 +383,6 @@ class _Search:
                     self.specs[spec.name] = spec
                     order = (bound, *item.order[1:], spec.name)
                     heapq.heappush(self.queues[_CANDIDATE], _Item(bound, order, _CANDIDATE, item.composition, spec))
-
-    def _ik_bound(self, verdict: Verdict) -> float:
-        """The stage-1 bound of a composition through the relaxed step B: for the objective's
-        time, the joint travel time of its fastest pair (:attr:`Verdict.time_bound`; through its
-        poses, pauses included, with several goals), less what the clusters' members may differ by
-        at each move's ends, within the limits verification allows (0 with free
-        ends: step C then chooses its own ends); with the objective's costs of the design
-        (:func:`~modular_robots.bounds.objective_bound`)."""
-        objective, catalog = self.scenario.task.cost, self.scenario.catalog
-        time = 0.0
-        if objective.counts_time and not self.scenario.optimizer.free_ends and verdict.time_bound is not None:
-            limits = [lever.velocity for lever in joint_levers(verdict.composition, catalog)]
-            slowest = min((v for v in limits if 0.0 < v < math.inf), default=math.inf)
-            moves = len(verdict.q_via) + 1  # each move's ends may differ by a cluster's width
-            time = max(verdict.time_bound - 2 * moves * _CLUSTER / slowest, 0.0) / (1.0 + LIMIT_TOLERANCE)
-        design = design_of(verdict.composition.modules, catalog) if objective.counts_design else None
-        return objective_bound(objective, time, design)
 
     # -- stage 3: step C ------------------------------------------------------------------------------
     def _optimise(self, items: list[_Item], deadline: float) -> None:
@@ -579,6 +564,31 @@ class _Search:
         self.recorder.update(search=block, seconds=self.seconds, every=every if write else math.inf)
         if write:
             self.notify("search", figures)
+
+
+def ik_bound(scenario: Scenario, verdict: Verdict) -> float:
+    """The stage-1 bound of a composition through the relaxed step B: for the objective's
+    time, the joint travel time of its fastest pair (:attr:`Verdict.time_bound`), less what
+    the clusters' members may differ by, within the limits verification allows (0 with free
+    ends: step C then chooses its own ends); with several goals, the travel between the first
+    and the last configuration, which step C keeps (those between are free there), plus the
+    pauses; with the objective's costs of the design
+    (:func:`~modular_robots.bounds.objective_bound`)."""
+    objective, catalog = scenario.task.cost, scenario.catalog
+    time = 0.0
+    if objective.counts_time and not scenario.optimizer.free_ends and verdict.time_bound is not None:
+        limits = np.array([lever.velocity for lever in joint_levers(verdict.composition, catalog)])
+        slowest = min((v for v in limits if 0.0 < v < math.inf), default=math.inf)
+        travel, pauses = verdict.time_bound, 0.0
+        if verdict.q_via:
+            assert verdict.q_start is not None and verdict.q_goal is not None  # (a time bound has them)
+            limited = np.isfinite(limits) & (limits > 0.0)
+            moved = np.abs(np.subtract(verdict.q_goal, verdict.q_start))[limited] / limits[limited]
+            travel = float(np.max(moved, initial=0.0))
+            pauses = math.fsum(g.duration for g in scenario.task.goals if g.kind == "pause")
+        time = (max(travel - 2 * _CLUSTER / slowest, 0.0) + pauses) / (1.0 + LIMIT_TOLERANCE)
+    design = design_of(verdict.composition.modules, catalog) if objective.counts_design else None
+    return objective_bound(objective, time, design)
 
 
 def _check_chunk(context, chunk: list[tuple[int, Composition]]) -> list[Verdict]:

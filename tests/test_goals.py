@@ -32,7 +32,9 @@ from modular_robots.ocp.candidate import make_candidate
 from modular_robots.ocp.ends import DEFAULT_TOLERANCE
 from modular_robots.pipeline import candidate_specs, cost_bound
 from modular_robots.plan.trajectory import controller_rate
+from modular_robots.plan.verification import LIMIT_TOLERANCE
 from modular_robots.scenario import load_scenario
+from modular_robots.search import ik_bound
 
 from .helpers.paths import ROOT
 from .test_shooting import central_difference, row_relative_error
@@ -264,6 +266,10 @@ def test_step_bs_time_bound_of_a_cycle_is_its_way_out_and_its_pause_below_the_op
     out = np.abs(np.subtract(verdict.q_via[0], verdict.q_start)) / robot.velocity_limit
     assert verdict.time_bound == pytest.approx(out.max() + 0.5, rel=1e-12) and out.max() > 0.5
     assert result.status == "optimal" and verdict.time_bound < result.cost
+    # the search's stage-1 bound keeps to the configurations step C keeps, the first and the last
+    # (here the same): the pause alone
+    scenario = pause_candidate[0]
+    assert ik_bound(scenario, verdict) == pytest.approx(0.5 / (1.0 + LIMIT_TOLERANCE), rel=1e-12)
 
 
 def test_a_pause_and_a_return_hold_on_the_sampled_plan(solved_pause):
