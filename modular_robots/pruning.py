@@ -146,9 +146,10 @@ def ratio_rule(
     ``c_k - lookahead * (earlier[k] - c_k)`` is within the threshold: still converging towards it.
     With ``settings.patience > 0``, a candidate whose iterates have not been trusted for
     ``untrusted_for[k] >= patience`` iterations is pruned too, once a reference exists. A
-    candidate whose floor exceeds the threshold is pruned whatever its iterate, unless the floor is
-    within ``band`` (a lexicographic objective's tie band) of the reference; one absent from
-    ``view.costs`` is judged on its floor only and is no reference.
+    candidate whose floor exceeds the threshold is pruned whatever its iterate. Nothing within
+    ``band`` (a lexicographic objective's tie band) of the reference is pruned, where the band is
+    wider than the threshold: the design may still choose it. One absent from ``view.costs`` is
+    judged on its floor only and is no reference.
     """
     if view.iteration < settings.start_iteration:
         return {}
@@ -157,8 +158,10 @@ def ratio_rule(
     if reference is None or reference <= 0.0:
         return {}
 
+    margin = max(settings.threshold, band - 1.0)  # a robot within the tie band may still win
+
     def above(cost: float) -> bool:
-        return (cost - reference) / reference > settings.threshold
+        return (cost - reference) / reference > margin
 
     def versus(what: str, cost: float) -> str:
         return (

@@ -292,6 +292,12 @@ def test_the_ratio_rules_bound_clause_keeps_a_robot_within_a_wide_band():
     settings = PruningSettings(threshold=0.5)
     assert set(ratio_rule(view, settings)) == {"close", "far"}
     assert set(ratio_rule(view, settings, band=1.8)) == {"far"}  # 1.6 is within 80 % of the best
+    # a trusted cost inside a band wider than the threshold is kept too (it pruned a robot at
+    # 3.305 s with the best at 2.174 s and a band to 3.479 s), and one beyond it is not
+    costs, floors = {"inside": 1.52, "outside": 1.65}, {"inside": 1.0, "outside": 1.0}
+    trusted = RoundCosts(5, costs, dict.fromkeys(costs, 0.0), {"best": 1.0}, floors=floors)
+    assert set(ratio_rule(trusted, settings)) == {"inside", "outside"}
+    assert set(ratio_rule(trusted, settings, band=1.6)) == {"outside"}
 
 
 # -- minimum energy -------------------------------------------------------------------------------
