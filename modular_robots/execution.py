@@ -67,6 +67,7 @@ __all__ = [
     "ProcessExecutor",
     "make_executor",
     "single_threaded_blas",
+    "signals_deferred",
     "terminations_raise",
 ]
 
@@ -211,6 +212,31 @@ def terminations_raise(final: bool = False) -> Iterator[None]:
             ignore = final and _ending["signum"] is not None
             for signum, handler in previous.items():
                 signal.signal(signum, signal.SIG_IGN if ignore else handler)
+
+
+@contextlib.contextmanager
+def signals_deferred() -> Iterator[None]:
+    """Within the block, an :data:`ENDING` signal whose handler Python runs is held back, and
+    delivered to that handler when the block ends: around library code that swallows
+    ``BaseException`` (trimesh, under yourdfpy), where the handler's ``KeyboardInterrupt`` or
+    :class:`~modular_robots.exceptions.Terminated` would be lost and the run go on, or fail later
+    with a made-up error. Outside the main thread the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {signum: signal.getsignal(signum) for signum in ENDING}
+    for signum, handler in previous.items():
+        if callable(handler):
+            signal.signal(signum, lambda number, frame: held.append(number))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            if callable(handler):
+                signal.signal(signum, handler)
+        if held:
+            signal.raise_signal(held[0])
 
 
 @contextlib.contextmanager

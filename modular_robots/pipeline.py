@@ -246,13 +246,7 @@ def _run(scenario, out, engine, feasibility, notify, max_compositions) -> RunRes
             raise InfeasibleError(f"no candidate converged to a verified trajectory ({reasons})")
         certificate = exhaustive_certificate(summary, results, bounds, winner, scenario.task.cost)
         recorder.update(search={"kind": "all", "certificate": certificate.to_json()})
-        recorder.record_winner(
-            winner,
-            f"{scenario.name}: rule {scenario.pruning.rule}",
-            track_winner(winner),
-            winner_approach(winner, scenario),
-        )
-        recorder.finish("done")
+        record_final_winner(recorder, winner, scenario, f"{scenario.name}: rule {scenario.pruning.rule}")
         return RunResult(tuple(results), winner, summary, rounds, dict(recorder.seconds), certificate)
 
 
@@ -360,8 +354,7 @@ def optimize_composition(
             reason = "; ".join(f"{r.name}: {r.reason}" for r in results)
             recorder.finish("failed", reason)
             raise InfeasibleError(reason)
-        recorder.record_winner(winner, tracking=track_winner(winner), approach=winner_approach(winner, scenario))
-        recorder.finish("done")
+        record_final_winner(recorder, winner, scenario)
         return RunResult(tuple(results), winner, summary, 0, dict(recorder.seconds))
 
 
@@ -370,6 +363,23 @@ def _labelled(result: CandidateResult, spec: CandidateSpec) -> CandidateResult:
     if result.composition:
         return result
     return replace(result, composition=spec.composition.name, boundary_pair=spec.boundary_pair)
+
+
+def record_final_winner(
+    recorder: RunRecorder, winner: CandidateResult, scenario: Scenario, title: str | None = None, message: str = ""
+) -> None:
+    """Write the verified ``winner`` with its closed-loop check and closest approach, and end the
+    run ``done`` with ``message``. Interrupted meanwhile (the check and the files take about a
+    second), the winner is still written, without the check, and the run ends ``interrupted``:
+    a Ctrl-C in the last second of a long run lost it."""
+    try:
+        recorder.record_winner(winner, title, track_winner(winner), winner_approach(winner, scenario))
+    except KeyboardInterrupt as exc:
+        reason = str(exc) if isinstance(exc, Terminated) else "interrupted by the user"
+        recorder.record_winner(winner, title)
+        recorder.finish("interrupted", f"{reason}; {winner.name} had verified and is written as the winner")
+        raise
+    recorder.finish("done", message)
 
 
 def winner_approach(result: CandidateResult, scenario: Scenario, samples: int = 401) -> Approach | None:

@@ -64,7 +64,7 @@ from .feasibility import (
 from .frontier import bound_chunks, take_pass
 from .ocp.candidate import CandidateSpec, make_candidate
 from .ocp.solver import Iterate
-from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, track_winner, winner_approach
+from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, record_final_winner
 from .plan.boundary import BoundaryPair
 from .plan.candidate import CandidateResult, CandidateStatus
 from .plan.document import stage_counts, status_counts
@@ -504,13 +504,9 @@ class _Search:
         if winner.trajectory is None:  # found in an earlier session: solved again (deterministic)
             winner = _solve(self.scenario, self.specs[winner.name], winner)
             self.results[winner.name] = winner
-        recorder.record_winner(
-            winner,
-            f"{self.scenario.name}: best-first search",
-            track_winner(winner),
-            winner_approach(winner, self.scenario),
+        record_final_winner(
+            recorder, winner, self.scenario, f"{self.scenario.name}: best-first search", certificate.line()
         )
-        recorder.finish("done", certificate.line())
         self.seconds["search"] = time.perf_counter() - start
         return SearchResult(tuple(self._ranked()), winner, self.summary, self.rounds, dict(self.seconds), certificate)
 

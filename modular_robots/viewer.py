@@ -19,11 +19,11 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
-import yourdfpy
 
 from .appearance import KIND_COLOURS, KIND_LABELS, colour_of_rgba
 from .costs import Design, Objective, parse_objective
 from .exceptions import InputError, shorten
+from .execution import signals_deferred
 from .folder import ResultsFolder, atomic_write
 from .obstacles import obstacle_label
 from .obstacles._stl import MAX_VISUAL_TRIANGLES, StlError, read_stl, welded
@@ -96,19 +96,24 @@ def scene_data(urdf_path: Path, trajectory: Trajectory, document: ResultDocument
     (three.js's order), in the base frame [m]. ``document``: as read, or its JSON (whose task
     and margin may be missing)."""
     text = Path(urdf_path).read_bytes()  # parsed from memory: lxml takes no file name it cannot encode
-    urdf = yourdfpy.URDF.load(io.BytesIO(text), load_meshes=False)
     joints = robot_from_urdf(text.decode("utf-8")).joint_names
     tf = float(trajectory.t[-1])
     count = int(min(MAX_FRAMES, max(2, np.ceil(tf * FRAME_RATE) + 1)))
     times = np.linspace(0.0, tf, count)
     qs = trajectory.at(times)[0]
-    painted = any(link.visuals for link in urdf.link_map.values())  # a URDF from before visuals: its shapes
-    links = [link for link in urdf.link_map.values() if (link.visuals if painted else link.collisions)]
     folder = Path(urdf_path).parent
     frames = []
-    for q in qs:
-        urdf.update_cfg(dict(zip(joints, q)))
-        frames.append([_columns(urdf.get_transform(link.name, urdf.base_link)) for link in links])
+    # trimesh (imported here, not at start-up) swallows BaseException in places: a Ctrl-C or
+    # SIGTERM waits for the end of the block instead of being lost to a later, made-up error
+    with signals_deferred():
+        import yourdfpy
+
+        urdf = yourdfpy.URDF.load(io.BytesIO(text), load_meshes=False)
+        painted = any(link.visuals for link in urdf.link_map.values())  # a URDF from before visuals: its shapes
+        links = [link for link in urdf.link_map.values() if (link.visuals if painted else link.collisions)]
+        for q in qs:
+            urdf.update_cfg(dict(zip(joints, q)))
+            frames.append([_columns(urdf.get_transform(link.name, urdf.base_link)) for link in links])
     tool = np.column_stack([np.interp(times, trajectory.t, trajectory.tool[:, k]) for k in range(3)])
     task = drawn_task(document)
     return {

@@ -822,3 +822,55 @@ def test_a_new_run_removes_the_old_runs_exports(finished, tmp_path):
     result = CliRunner().invoke(main, ["run", str(infeasible), "--jobs", "1", "--out", str(folder)])
     assert result.exit_code == 1
     assert sorted(p.name for p in folder.iterdir()) == ["result.json"]
+
+
+def test_a_signal_inside_code_that_swallows_base_exception_arrives_after_it():
+    """trimesh (under yourdfpy, building the page) catches BaseException in places: a Ctrl-C or
+    SIGTERM raised there was lost, and the run went on or failed with a made-up 'cannot pose the
+    winner'. Within signals_deferred it is held back and raised when the block ends."""
+    from modular_robots.execution import signals_deferred, terminations_raise
+
+    def swallowing(signum: int) -> bool:
+        try:
+            os.kill(os.getpid(), signum)
+            time.sleep(0.05)  # (the handler runs here)
+        except BaseException:
+            return False  # what trimesh does
+        return True
+
+    with terminations_raise():
+        assert not swallowing(signal.SIGTERM)  # without the block the ending is lost
+        reached = []
+        with pytest.raises(Terminated), signals_deferred():
+            reached.append(swallowing(signal.SIGTERM))
+        assert reached == [True]
+    with pytest.raises(KeyboardInterrupt), signals_deferred():
+        assert swallowing(signal.SIGINT)
+
+
+def test_the_command_line_starts_without_trimesh():
+    """yourdfpy (and trimesh, 0.2 s of imports that swallow a Ctrl-C) is imported when a page
+    is drawn, not when a command starts: a Ctrl-C in the first second was ignored."""
+    code = "import sys, modular_robots.cli; print('trimesh' in sys.modules, 'yourdfpy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "False"]
+
+
+def test_an_interruption_while_the_winner_is_written_keeps_it(tmp_path, monkeypatch):
+    """The closed-loop check and the winner's files take about a second after step C: a Ctrl-C
+    there ended the run 'interrupted' with no winner and removed the files already written, a
+    verified solve lost. The winner is now written without the check."""
+    import modular_robots.pipeline as pipeline_module
+
+    def interrupted(result):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline_module, "track_winner", interrupted)
+    scenario = load_scenario(ROOT / "tests" / "data" / "small-fast.yaml")
+    with pytest.raises(KeyboardInterrupt):
+        pipeline_module.optimize_composition(scenario, "B-J1-L3-J1-L1-E2", tmp_path / "out")
+    document = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert document["status"] == "interrupted" and document["winner"]["composition"] == "B-J1-L3-J1-L1-E2"
+    assert document["message"].endswith("had verified and is written as the winner")
+    for name in ("urdf", "trajectory"):
+        assert (tmp_path / "out" / document["winner"]["files"][name]).is_file()
