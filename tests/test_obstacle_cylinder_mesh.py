@@ -25,7 +25,7 @@ from modular_robots.obstacles import (
     obstacle_to_json,
 )
 from modular_robots.obstacles._geometry import rpy_matrix
-from modular_robots.obstacles._stl import read_stl
+from modular_robots.obstacles._stl import StlError, read_stl
 from modular_robots.ocp.candidate import Candidate
 from modular_robots.ocp.shooting import ShootingProblem
 from modular_robots.scenario import OptimizerSettings, load_scenario
@@ -435,3 +435,14 @@ def test_the_time_optimal_motion_goes_round_each_shape(shape, tmp_path):
     assert result.verification.passed and result.verification.min_clearance >= 0.0
     qs = result.trajectory.at(np.arange(0.0, result.tf, 1e-2))[0]
     assert min(independent(q) for q in qs) >= -1e-6
+
+
+def test_an_ascii_stl_cut_short_at_a_facet_is_refused(tmp_path):
+    """An interrupted copy of the machine's ASCII STL, cut after a whole facet, was read as 481 of
+    its 748 triangles without a word: collisions against part of the machine."""
+    data = MACHINE_FILE.read_bytes()
+    assert read_stl(MACHINE_FILE)[0].shape == (748, 3, 3)
+    cut = tmp_path / "cut.stl"
+    cut.write_bytes(data[: data.index(b"endfacet", len(data) * 2 // 3) + len(b"endfacet")] + b"\r\n")
+    with pytest.raises(StlError, match=r"cut\.stl: an ASCII STL cut short \(it does not end with 'endsolid'\)"):
+        read_stl(cut)

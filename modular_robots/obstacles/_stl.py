@@ -54,6 +54,8 @@ def read_stl(path: Path, max_triangles: int | None = None) -> tuple[np.ndarray, 
             f"{path} is not an STL file: neither binary (84 + 50 bytes a triangle, {len(data)} bytes) "
             "nor ASCII (beginning with 'solid')"
         )
+    if not data.rstrip().rsplit(b"\n", 1)[-1].strip().lower().startswith(b"endsolid"):
+        raise StlError(f"{path}: an ASCII STL cut short (it does not end with 'endsolid'): copy it again")
     vertices = _VERTEX.findall(data)
     facets = len(_FACET.findall(data))
     if len(vertices) != 3 * facets:
