@@ -35,12 +35,27 @@ __all__ = [
     "atomic_write",
     "atomic_path",
     "check_writable",
+    "naming_the_file",
     "is_temporary",
     "LOCK",
     "TEMPORARY_MARK",
 ]
 
 LOCK = ".lock"
+
+
+@contextlib.contextmanager
+def naming_the_file(path: str | os.PathLike[str]) -> Iterator[None]:
+    """An ``OSError`` within the block that names no file (a write to an open file: 'File too
+    large', 'No space left on device') names ``path``, as the command line then shows it."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is None and exc.strerror:
+            raise OSError(exc.errno, exc.strerror, os.fspath(path)) from exc
+        raise
+
+
 #: In the name of every temporary file this package writes, and of no other file:
 #: ``.<name>.<8 random characters>.modular-robots-tmp<suffix>``.
 TEMPORARY_MARK = ".modular-robots-tmp"

@@ -61,6 +61,7 @@ from .feasibility import (
     check_compositions,
     composition_space,
 )
+from .folder import naming_the_file
 from .frontier import bound_chunks, take_pass
 from .ocp.candidate import CandidateSpec, make_candidate
 from .ocp.solver import Iterate
@@ -709,7 +710,9 @@ class _Log:
 
     def __exit__(self, *exc: object) -> None:
         if self.file is not None:
-            self.file.close()
+            file, self.file = self.file, None
+            with naming_the_file(self.path or STATE):  # (what a failed write left buffered fails again)
+                file.close()
 
     def _read(self, lines: list[str]) -> None:
         for number, line in enumerate(lines[1:], start=2):
@@ -733,8 +736,9 @@ class _Log:
 
     def _write(self, entry: dict) -> None:
         if self.file is not None:
-            self.file.write(json.dumps(entry) + "\n")
-            self.file.flush()
+            with naming_the_file(self.path or STATE):
+                self.file.write(json.dumps(entry) + "\n")
+                self.file.flush()
 
     def verdict(self, stage: int, composition: Composition) -> Verdict | None:
         document = self.verdicts.get((stage, composition.name))

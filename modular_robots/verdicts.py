@@ -22,7 +22,7 @@ from typing import IO
 from .composition import Composition
 from .exceptions import InputError, shorten
 from .feasibility import FeasibilitySettings, Verdict
-from .folder import FileLock
+from .folder import FileLock, naming_the_file
 from .scenario import Scenario
 
 __all__ = ["VerdictFile", "fingerprint", "verdict_from_json", "lock_path", "FORMAT"]
@@ -119,12 +119,15 @@ class VerdictFile:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
-        if self._lock is not None:
-            self._lock.__exit__()
-            self._lock = None
+        try:
+            if self._file is not None:
+                file, self._file = self._file, None
+                with naming_the_file(self.path):  # (what a failed write left buffered fails again)
+                    file.close()
+        finally:
+            if self._lock is not None:
+                self._lock.__exit__()
+                self._lock = None
 
     def _open(self) -> None:
         header = (json.dumps(self.header) + "\n").encode()
@@ -211,9 +214,10 @@ class VerdictFile:
         document = verdict.to_json()
         document["seconds"] = verdict.seconds
         assert self._file is not None, "use VerdictFile as a context manager"
-        if self._cut:
-            self._file.truncate(self._complete)
-            self._cut = False
-        self._file.write((json.dumps(document, separators=(",", ":")) + "\n").encode())
-        self._file.flush()
+        with naming_the_file(self.path):
+            if self._cut:
+                self._file.truncate(self._complete)
+                self._cut = False
+            self._file.write((json.dumps(document, separators=(",", ":")) + "\n").encode())
+            self._file.flush()
         self._line += 1

@@ -874,3 +874,22 @@ def test_an_interruption_while_the_winner_is_written_keeps_it(tmp_path, monkeypa
     assert document["message"].endswith("had verified and is written as the winner")
     for name in ("urdf", "trajectory"):
         assert (tmp_path / "out" / document["winner"]["files"][name]).is_file()
+
+
+def test_a_full_disk_under_the_verdicts_file_names_it(tmp_path):
+    """A write to an open file fails without a file name ('File too large', 'No space left on
+    device'): ``filter --verdicts`` and the search's record said only 'Error: File too large'."""
+    verdicts = tmp_path / "v.jsonl"
+
+    def limit_file_size():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (3000, 3000))
+
+    done = subprocess.run(
+        [*CLI, "filter", str(SMALL), "--jobs", "1", "--verdicts", str(verdicts)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=limit_file_size,
+    )
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.rstrip().splitlines()[-1] == f"Error: {verdicts}: File too large", done.stderr
