@@ -25,7 +25,8 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from .bounds import JOINT_TRAVEL
+from .bounds import DESIGN, JOINT_TRAVEL
+from .costs import Objective
 from .plan.candidate import CandidateResult, CandidateStatus
 
 __all__ = ["Certificate", "Ledger"]
@@ -132,6 +133,14 @@ class Ledger:
         self.unexplored: list[float] = []
         self.extra: Counter[str] = Counter()  # compositions counted without a name (beyond the frontier)
         self._unexplored_named = 0  # of ``classes``, those unexplored
+
+    @classmethod
+    def of(cls, space: int, objective: Objective | None = None) -> Ledger:
+        """The ledger of a space searched for ``objective`` (its limit, and its bound's name: the
+        joint travel, or ``design`` for the costs of the design alone); None: the time."""
+        if objective is None:
+            return cls(space)
+        return cls(space, objective.limit, JOINT_TRAVEL if objective.counts_time else DESIGN)
 
     @property
     def checked(self) -> int:

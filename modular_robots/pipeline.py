@@ -20,7 +20,6 @@ from typing import cast
 
 import numpy as np
 
-from .bounds import DESIGN, JOINT_TRAVEL
 from .certificate import Certificate, Ledger
 from .collision import Approach, CollisionModel, closest_approach
 from .composition import Composition
@@ -261,10 +260,7 @@ def exhaustive_certificate(
     test, each of the others by its candidates' ends (:class:`~modular_robots.certificate.Ledger`,
     with ``objective``'s :meth:`~modular_robots.costs.Objective.limit` and bound name)."""
     results = list(results)
-    if objective is None:
-        ledger = Ledger(summary.checked)
-    else:
-        ledger = Ledger(summary.checked, objective.limit, JOINT_TRAVEL if objective.counts_time else DESIGN)
+    ledger = Ledger.of(summary.checked, objective)
     for test, count in summary.removed.items():
         ledger.removed_many(test, count)
     for result in results:

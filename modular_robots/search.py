@@ -174,8 +174,7 @@ class _Search:
         self.tolerance = feasibility.tolerance
         #: A composition has a chance only when its bound is below the best cost times this.
         self.band = scenario.task.cost.band
-        objective = scenario.task.cost
-        self.ledger = Ledger(self.space, objective.limit, JOINT_TRAVEL if objective.counts_time else DESIGN)
+        self.ledger = Ledger.of(self.space, scenario.task.cost)
         self.summary = FeasibilitySummary()
         self.results: dict[str, CandidateResult] = {}
         self.specs: dict[str, CandidateSpec] = {}

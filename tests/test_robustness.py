@@ -317,23 +317,24 @@ def test_an_ending_while_the_winner_files_are_written_leaves_none_of_them(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result.json"]
 
 
-def test_a_file_size_limit_ends_the_run_as_failed_with_a_sentence(tmp_path):
-    """``ulimit -f``: the writes that do not fit fail; the run says so in result.json (cut short
-    if need be) and in one line, and leaves no temporary file."""
-    out = tmp_path / "out"
-    limit = 40_000  # bytes: result.json's first writes fit, the candidates' histories do not
+def _with_file_limit(args: list[str], limit: int) -> subprocess.CompletedProcess:
+    """The command line with ``args`` in a child whose files may hold at most ``limit`` bytes
+    (``ulimit -f``): a full disk, for the writes that go past it."""
 
     def limit_file_size():
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    done = subprocess.run(
-        [*CLI, "run", str(SMALL), "--jobs", "1", "--out", str(out)],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        preexec_fn=limit_file_size,
+    return subprocess.run(
+        [*CLI, *args], cwd=ROOT, capture_output=True, text=True, timeout=300, preexec_fn=limit_file_size
     )
+
+
+def test_a_file_size_limit_ends_the_run_as_failed_with_a_sentence(tmp_path):
+    """``ulimit -f``: the writes that do not fit fail; the run says so in result.json (cut short
+    if need be) and in one line, and leaves no temporary file."""
+    out = tmp_path / "out"
+    # 40,000 bytes: result.json's first writes fit, the candidates' histories do not
+    done = _with_file_limit(["run", str(SMALL), "--jobs", "1", "--out", str(out)], 40_000)
     assert done.returncode == 1, done.stderr
     last = done.stderr.rstrip().splitlines()[-1]
     assert last.startswith("Error: ") and "File too large" in last and "Traceback" not in done.stderr
@@ -559,16 +560,7 @@ def test_a_urdf_that_does_not_fit_is_not_left_cut_short(tmp_path):
     """``urdf -o`` at a file-size limit: no truncated file, and the message names it."""
     target = tmp_path / "x.urdf"
 
-    def limit_file_size():
-        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
-
-    done = subprocess.run(
-        [*CLI, "urdf", "B-J1-L1-J1-L1-J1-L1-E2", "--scenario", str(SMALL), "-o", str(target)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        preexec_fn=limit_file_size,
-    )
+    done = _with_file_limit(["urdf", "B-J1-L1-J1-L1-J1-L1-E2", "--scenario", str(SMALL), "-o", str(target)], 2048)
     assert done.returncode == 1 and done.stderr == f"Error: {target}: File too large\n"
     assert list(tmp_path.iterdir()) == []
 
@@ -881,15 +873,6 @@ def test_a_full_disk_under_the_verdicts_file_names_it(tmp_path):
     device'): ``filter --verdicts`` and the search's record said only 'Error: File too large'."""
     verdicts = tmp_path / "v.jsonl"
 
-    def limit_file_size():
-        resource.setrlimit(resource.RLIMIT_FSIZE, (3000, 3000))
-
-    done = subprocess.run(
-        [*CLI, "filter", str(SMALL), "--jobs", "1", "--verdicts", str(verdicts)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        preexec_fn=limit_file_size,
-    )
+    done = _with_file_limit(["filter", str(SMALL), "--jobs", "1", "--verdicts", str(verdicts)], 3000)
     assert done.returncode == 1, done.stderr
     assert done.stderr.rstrip().splitlines()[-1] == f"Error: {verdicts}: File too large", done.stderr

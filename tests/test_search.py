@@ -24,7 +24,6 @@ from threadpoolctl import threadpool_info, threadpool_limits
 import modular_robots.search as search_module
 from modular_robots import frontier as frontier_module
 from modular_robots import load_scenario
-from modular_robots.bounds import DESIGN, JOINT_TRAVEL
 from modular_robots.certificate import Ledger
 from modular_robots.cli import main
 from modular_robots.cli_output import run_table
@@ -309,7 +308,7 @@ def test_a_composition_the_ranking_would_tie_with_the_best_is_not_excluded_by_it
     search certified a robot of price 111 where the exhaustive run found one of 63. Every bound
     the ranking may still let win is kept, and without tie-breaks a tie is as good as the best."""
     objective = parse_objective(text)
-    ledger = Ledger(1, objective.limit, JOINT_TRAVEL if objective.counts_time else DESIGN)
+    ledger = Ledger.of(1, objective)
     rng = np.random.default_rng(3)
     for best in [4.0, 3.0, 0.5927, *rng.uniform(0.1, 10.0, 50)]:
         edge = best * objective.band
