@@ -58,5 +58,5 @@ clean:
 
 test-scipy-low: .venv-scipy-low/.stamp
 	.venv-scipy-low/bin/python -m pytest -q -p no:cacheprovider tests/test_scipy_hooks.py tests/test_trust_constr.py \
-		tests/test_sqp.py tests/test_canonical.py tests/test_projections.py tests/test_projections_banded.py \
+		tests/test_sqp.py tests/test_checkpoint.py tests/test_canonical.py tests/test_projections.py tests/test_projections_banded.py \
 		tests/test_complementarity.py tests/test_shooting.py

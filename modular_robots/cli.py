@@ -606,8 +606,8 @@ def _search(scenario, out: Path, jobs: int, budget: float | None) -> None:
     if again := last.get("cut_again"):
         click.echo(
             f"warning: the budget stopped {len(again)} candidate(s) no further than a run before did "
-            f"({shorten(again[0])}{', ...' if len(again) > 1 else ''}): a stopped candidate starts over, so one that "
-            "takes longer than the budget never ends; raise --budget",
+            f"({shorten(again[0])}{', ...' if len(again) > 1 else ''}): it starts over each time (stopped before "
+            "its first iterate, or its checkpoint lost); raise --budget",
             err=True,
         )
     click.echo(f"wrote {written_files(out)}")

@@ -7,6 +7,7 @@ import signal
 __all__ = [
     "ModularRobotsError",
     "InputError",
+    "CheckpointWarning",
     "CatalogError",
     "ScenarioError",
     "CompositionError",
@@ -38,6 +39,11 @@ class InputWarning(UserWarning):
     """A value given by the user is valid but looks like a mistake (degrees where radians are
     expected); the message names the file, line and key, as :class:`InputError`'s do. The command
     line prints each as one ``Warning: ...`` line."""
+
+
+class CheckpointWarning(UserWarning):
+    """A stopped candidate's checkpoint could not be written or read: the candidate starts from its
+    beginning in the run that goes on (slower, the same result)."""
 
 
 class CatalogError(InputError):

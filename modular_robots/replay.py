@@ -3,10 +3,11 @@
 A search stopped in the middle of a batch (a budget, Ctrl-C, a crash) has recorded the candidates
 that ended before the stop, each with its *trace*: the iterates step D saw from it, round by round.
 Run again, the batch is formed anew; :class:`ReplayingExecutor` gives step D the recorded
-candidates' traces and ends (no solve), and runs the others from their start. Step C and step D
-are deterministic, so the lockstep takes the same decisions as the uninterrupted run: the same
-candidates are pruned in the same rounds, and the batch ends as it would have without the stop,
-while no candidate that had ended is solved twice.
+candidates' traces and ends (no solve), and hosts the others: those the stop cut short go on from
+their checkpoints (:mod:`~modular_robots.ocp.resume`; they yield their iterates again first), the
+rest start. Step C and step D are deterministic, so the lockstep takes the same decisions as the
+uninterrupted run: the same candidates are pruned in the same rounds, and the batch ends as it
+would have without the stop, while no candidate that had ended is solved twice.
 """
 
 from __future__ import annotations

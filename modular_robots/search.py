@@ -64,6 +64,7 @@ from .feasibility import (
 from .folder import naming_the_file
 from .frontier import bound_chunks, take_pass
 from .ocp.candidate import CandidateSpec, make_candidate
+from .ocp.resume import CheckpointFolder
 from .ocp.solver import Iterate
 from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, record_final_winner
 from .plan.boundary import BoundaryPair
@@ -84,6 +85,8 @@ logger = logging.getLogger(__name__)
 SEARCHES = ("all", "best-first")
 #: The search's record in the results folder.
 STATE = "search.jsonl"
+#: The folder (in the results folder) of the checkpoints of candidates a stop interrupted.
+CHECKPOINTS = "search-checkpoints"
 #: The ``search`` version of its first line.
 FORMAT = 1
 #: Configurations step B keeps as one when within this distance (max norm) [rad | m]
@@ -190,8 +193,8 @@ class _Search:
         self.rounds = 0
         #: Whether the budget stopped a batch of step C before its end.
         self.cut = False
-        #: Candidates the budget stopped no further than a run before did (a stopped candidate
-        #: starts over: one slower than the budget never ends).
+        #: Candidates the budget stopped no further than a run before did (they start over: stopped
+        #: before their first iterate, or their checkpoints lost).
         self.cut_again: set[str] = set()
         #: Step C's batch under way: its candidates not ended yet and its lockstep round.
         self.running = (0, 0)
@@ -391,7 +394,8 @@ class _Search:
         has replay their trace (:class:`~modular_robots.replay.ReplayingExecutor`), so that the
         batch ends as it would have without a stop. At the ``deadline`` the lockstep stops: the
         candidates still running end ``stopped`` (unexplored, with their bound, in the
-        certificate), to be solved by a run that goes on."""
+        certificate), each with a checkpoint (:mod:`~modular_robots.ocp.resume`) that a run that
+        goes on resumes."""
         names = [item.spec.name for item in items if item.spec is not None]
         bounds = {item.spec.name: item.bound for item in items if item.spec is not None}
         recorded = {name: found for name in names if (found := self.log.result(name)) is not None}
@@ -400,7 +404,7 @@ class _Search:
             scenario, jobs = self.scenario, self.engine.jobs
 
             def hosts(live: list[str]):
-                specs = [self.specs[name] for name in live]
+                specs = [replace(self.specs[name], checkpoint=self.log.checkpoint(name)) for name in live]
                 return make_executor(make_candidate, scenario, specs, live, jobs, scenario.execution)
 
             executor = ReplayingExecutor(names, traced, hosts)
@@ -428,11 +432,12 @@ class _Search:
                     if progress.alive and time.perf_counter() >= deadline:
                         cut = True
                         break
-            except BaseException:  # the candidates it stopped, for result.json (not for the record)
+            except BaseException:  # the candidates it stopped: their checkpoints, and result.json (not the record)
                 rounds.close()
                 for name in names:
                     if name in manager.results and name not in self.results:
                         self.results[name] = _labelled(manager.results[name], self.specs[name])
+                        self.log.write_checkpoint(manager.results[name])
                 raise
             finally:
                 self.running = (0, 0)
@@ -446,6 +451,7 @@ class _Search:
                 if self.cut and result.status == CandidateStatus.STOPPED and result.iterations:
                     if result.iterations <= self.log.cuts.get(name, -1):
                         self.cut_again.add(name)
+                    self.log.write_checkpoint(manager.results[name])
                     self.log.write_cut(name, result.iterations)
         for name in names:
             result = recorded[name][0]
@@ -656,6 +662,7 @@ class _Log:
         self.path = Path(out) / STATE if out is not None else None
         text = repr((scenario.catalog, scenario.task, scenario.optimizer, scenario.pruning, feasibility, settings))
         self.fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
+        self.checkpoints = CheckpointFolder(Path(out) / CHECKPOINTS, self.fingerprint) if out is not None else None
         self.scenario = scenario
         self.verdicts: dict[tuple[int, str], dict] = {}
         self.results: dict[str, dict] = {}
@@ -698,6 +705,8 @@ class _Log:
         self.check()  # again, in the folder now locked
         lines = self._lines()
         if not lines:
+            if self.checkpoints is not None:
+                self.checkpoints.clear()  # (of a record removed to start afresh)
             self.file = open(self.path, "w", encoding="utf-8")
             self._write({"search": FORMAT, "fingerprint": self.fingerprint, "scenario": self.scenario.name})
             return self
@@ -746,6 +755,16 @@ class _Log:
     def write_verdict(self, stage: int, verdict: Verdict) -> None:
         self._write({"stage": stage, "verdict": {**verdict.to_json(), "seconds": verdict.seconds}})
 
+    def checkpoint(self, name: str):
+        """Candidate ``name``'s checkpoint, if a stop left one."""
+        return self.checkpoints.load(name) if self.checkpoints is not None else None
+
+    def write_checkpoint(self, result: CandidateResult) -> None:
+        """Keep a stopped candidate's checkpoint, for the run that goes on (a checkpoint of a
+        candidate stopped before its first iterate, or by a solver without one: none)."""
+        if self.checkpoints is not None and result.status == CandidateStatus.STOPPED and result.checkpoint is not None:
+            self.checkpoints.save(result.checkpoint)
+
     def write_cut(self, name: str, iterations: int) -> None:
         """Record that a budget stopped candidate ``name`` after ``iterations`` of its own."""
         self._write({"cut": name, "iterations": iterations})
@@ -764,3 +783,5 @@ class _Log:
         solves it)."""
         if result.status != CandidateStatus.STOPPED:
             self._write({"result": _result_json(result), "trace": trace_json(trace)})
+            if self.checkpoints is not None:
+                self.checkpoints.discard(result.name)

@@ -31,10 +31,12 @@ from modular_robots.composition import Composition
 from modular_robots.costs import parse_objective
 from modular_robots.exceptions import InfeasibleError, InputError
 from modular_robots.feasibility import check_composition
+from modular_robots.ocp import candidate as candidate_module
+from modular_robots.ocp import resume as resume_module
 from modular_robots.pipeline import candidate_specs, run_scenario
 from modular_robots.plan.candidate import CandidateResult
 from modular_robots.pruning import bound_rule
-from modular_robots.search import STATE, SearchSettings, search_scenario
+from modular_robots.search import CHECKPOINTS, STATE, SearchSettings, search_scenario
 
 from .helpers.paths import ROOT, SMALL
 
@@ -129,6 +131,48 @@ def test_a_search_stopped_anywhere_ends_as_an_uninterrupted_one_when_run_again(s
         assert document["search"]["progress"]["best"] == min(verified, default=None), moment
         again = search_scenario(scenario, out, jobs=1 + trial % 2)
         assert _answers(again) == _answers(expected), moment
+
+
+def test_a_candidate_stopped_mid_solve_goes_on_from_its_checkpoint(scenario, uninterrupted, tmp_path, monkeypatch):
+    """A stop inside a batch's lockstep leaves a checkpoint of each candidate it cut short; run
+    again, each such candidate yields its recorded iterates and its solver resumes where it
+    stopped (the first iteration it solves is the one after its checkpoint's), the search ends as
+    the uninterrupted one, and the checkpoints of the candidates that ended are removed."""
+    expected, _, calls = uninterrupted
+    resumed: dict[str, tuple[int, int]] = {}
+    real = candidate_module.make_solver
+
+    def make_solver(*args, resume=None, **kwargs):
+        solver = real(*args, resume=resume, **kwargs)
+        if resume is None:
+            return solver
+        inner = solver.iterate
+
+        def iterate():
+            for it in inner():
+                resumed.setdefault(args[1].robot.name, (resume.iteration, it.iteration - kwargs["iteration_offset"]))
+                yield it
+
+        solver.iterate = iterate
+        return solver
+
+    monkeypatch.setattr(candidate_module, "make_solver", make_solver)
+    for moment in range(calls // 3, calls):
+        out = tmp_path / f"at-{moment}"
+        with pytest.raises(_Stop):
+            search_scenario(scenario, out, jobs=1, on_progress=_stop_at(moment))
+        files = sorted((out / CHECKPOINTS).glob("*.npz"))
+        if files:
+            break
+    checkpoints = {c.name: c for c in map(resume_module.load, files)}
+    assert checkpoints and all(c.iteration > 0 for c in checkpoints.values())
+    again = search_scenario(scenario, out, jobs=1)
+    assert _answers(again) == _answers(expected)
+    for name, checkpoint in checkpoints.items():
+        composition = name.split("+")[0]
+        taken, first = resumed[composition]
+        assert taken == checkpoint.state.iteration and first == taken + 1, name
+    assert not list((out / CHECKPOINTS).glob("*.npz"))
 
 
 def _recorded(out) -> set[str]:
@@ -232,10 +276,12 @@ def test_a_budget_stops_step_c_mid_batch_and_a_second_run_replays_what_ended(
 
 
 def test_a_candidate_the_budget_stops_again_no_further_is_named(scenario, uninterrupted, tmp_path, monkeypatch):
-    """A stopped candidate starts over in the next run: with the same budget, one cut in a batch
-    before anything of it ended is cut again at the same iteration, for ever. The second run
-    names such candidates (``cut_again``; ``run`` prints a warning to raise --budget); a run
-    without the budget then ends as the uninterrupted search."""
+    """On a clock that counts the search's readings, a second run with the same budget gives back
+    the rounds it replays at the cost of solving them, as a candidate that starts over does (one
+    whose checkpoint was lost): a candidate cut in a batch before anything of it ended is cut
+    again at the same iteration. The second run names such candidates (``cut_again``; ``run``
+    prints a warning to raise --budget); a run without the budget then ends as the uninterrupted
+    search."""
     expected, _, _ = uninterrupted
     clock = _Clock()
     monkeypatch.setattr(search_module, "time", clock)

@@ -15,13 +15,14 @@ from __future__ import annotations
 import itertools
 import time
 from collections.abc import Generator, Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..catalog import Catalog
 from ..composition import Composition
 from ..costs import continuation
+from ..exceptions import ProblemError
 from ..plan.boundary import BoundaryPair
 from ..plan.candidate import CandidateResult, CandidateStatus
 from ..plan.verification import Verification
@@ -29,10 +30,11 @@ from ..robot import robot_model
 from ..scenario import OptimizerSettings, Scenario, Task
 from .ends import task_ends
 from .guess import swing_path
+from .resume import CandidateCheckpoint, SolverRun
 from .route import task_route
 from .shooting import ShootingProblem
-from .solver import Iterate, SolverOutcome
-from .solvers import make_solver
+from .solver import Iterate, SolverOutcome, resumable
+from .solvers import RESUMABLE, Solver, make_solver
 from .trajectory import sample_trajectory
 from .verification import verify
 
@@ -58,6 +60,8 @@ class CandidateSpec:
     boundary_pair: BoundaryPair = BoundaryPair.FASTEST
     #: Among several goals, step B's configurations at the vias (:class:`~modular_robots.ocp.route.Via`).
     q_via: tuple[tuple[float, ...], ...] = ()
+    #: Where a run before stopped it, to go on from (:class:`~modular_robots.ocp.resume.CandidateCheckpoint`).
+    checkpoint: CandidateCheckpoint | None = field(default=None, compare=False, repr=False)
 
     @property
     def name(self) -> str:
@@ -100,7 +104,13 @@ class Candidate:
         :func:`~modular_robots.ocp.guess.swing_path`'s guess, if it gives one: it made the two
         paper-5kg compositions that hold the goal at the edge of a joint's torque limit converge.
         Only a failed candidate pays for it, so the candidates that converge are unchanged.
+    resume
+        A :meth:`checkpoint` of a candidate made with the same arguments: this one yields and
+        ends as that one would have had it not been stopped (:mod:`~modular_robots.ocp.resume`),
+        without solving again what it had solved. Ignored where the solver cannot resume.
     """
+
+    _NO_Y = np.zeros(0)
 
     def __init__(
         self,
@@ -112,6 +122,7 @@ class Candidate:
         composition: str | None = None,
         boundary_pair: BoundaryPair = BoundaryPair.FASTEST,
         swing: bool = True,
+        resume: CandidateCheckpoint | None = None,
     ):
         self.problem = problem
         self.restart = restart
@@ -129,6 +140,15 @@ class Candidate:
         self._generator: Generator[Iterate, None, None] | None = None
         self._seconds = 0.0
         self._note = ""
+        if resume is not None and not (problem.settings.solver in RESUMABLE and resumable(resume.state)):
+            resume = None  # (solved from its start: the same result, later)
+        #: The checkpoint resumed from, while its runs are given back; then None.
+        self._resume = resume
+        self._runs: list[SolverRun] = []  # the runs ended (solved here or given back)
+        self._iterates: list[Iterate] = []  # of the run in progress, without decision vectors
+        self._solver: Solver | None = None  # the run in progress's solver
+        if resume is not None:
+            self._seconds = resume.seconds
 
     @property
     def seconds(self) -> float:
@@ -149,31 +169,86 @@ class Candidate:
         return self.result
 
     def close(self) -> None:
-        """Stop now; :attr:`result` records the last iterate with status ``stopped``."""
+        """Stop now; :attr:`result` records the last iterate with status ``stopped`` and, where
+        there is one, the :meth:`checkpoint` to go on from."""
+        checkpoint = self.checkpoint()
         if self._generator is not None:
             self._generator.close()
         if self.result is None:
             moves = " (while solving its moves one at a time)" if self.last is not None and self.last.warm_up else ""
             self._finish(CandidateStatus.STOPPED, "closed before convergence" + moves + self._note, None)
+            assert self.result is not None
+            self.result = replace(self.result, checkpoint=checkpoint)
+
+    def checkpoint(self) -> CandidateCheckpoint | None:
+        """Where the candidate stands while it waits at an iterate, for a candidate made with
+        ``resume=`` (None: not started, ended, or its solver keeps no state to go on from)."""
+        if self.result is not None:
+            return None
+        if self._resume is not None:  # still giving back the runs of the one it resumes
+            return self._resume if self.last is not None else None
+        take = getattr(self._solver, "checkpoint", None)
+        state = take() if take is not None else None
+        if state is None:
+            return None
+        return CandidateCheckpoint(self.name, tuple(self._runs), tuple(self._iterates), state, self._seconds)
+
+    def _step(self, it: Iterate) -> None:
+        self.last = it
+        self.history.append(it.cost)
+        self.violations.append(it.constraint_violation)
+        self.refinements.append(it.refinement)
+
+    def _solver_run(
+        self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, mark
+    ) -> Generator[Iterate, None, SolverOutcome]:
+        """One solver run from ``y0``, each iterate yielded as ``mark`` makes it; returns its
+        outcome. A run of the checkpoint being resumed is not solved again: an ended one gives
+        back its iterates and outcome, the one in progress its iterates, and its solver goes on."""
+        resume, state = self._resume, None
+        if resume is not None and len(self._runs) < len(resume.runs):
+            run = resume.runs[len(self._runs)]
+            for it in run.iterates:
+                self._step(it)
+                yield it
+            self._runs.append(run)
+            return run.outcome
+        if resume is not None:
+            for it in resume.iterates:
+                self._iterates.append(it)
+                self._step(it)
+                yield it
+            self._resume, state = None, resume.state
+            if len(state.x) != problem.n_variables:
+                raise ProblemError(
+                    f"{self.name}: its checkpoint is of a problem of {len(state.x)} variables, not "
+                    f"{problem.n_variables}; remove the checkpoint to solve it from its start"
+                )
+        solver = make_solver(
+            problem.settings.solver, problem, y0, jacobian=self.jacobian, iteration_offset=offset, resume=state
+        )
+        self._solver = solver
+        try:
+            for it in solver.iterate():
+                it = mark(it)
+                self._iterates.append(replace(it, y=self._NO_Y))
+                self._step(it)
+                yield it
+        finally:
+            self._solver = None
+            solver.close()
+            self._seconds += solver.outcome.seconds if solver.outcome else 0.0
+        outcome = solver.outcome
+        assert outcome is not None  # set once iterate() has returned (the Solver contract)
+        self._runs.append(SolverRun(tuple(self._iterates), outcome))
+        self._iterates = []
+        return outcome
 
     def _solve(
         self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int
     ) -> Generator[Iterate, None, SolverOutcome]:
         """One solver run, its iterates yielded; returns its outcome."""
-        solver = make_solver(problem.settings.solver, problem, y0, jacobian=self.jacobian, iteration_offset=offset)
-        try:
-            for it in solver.iterate():
-                it = replace(it, refinement=attempt)
-                self.last = it
-                self.history.append(it.cost)
-                self.violations.append(it.constraint_violation)
-                self.refinements.append(attempt)
-                yield it
-        finally:
-            solver.close()
-            self._seconds += solver.outcome.seconds if solver.outcome else 0.0
-        outcome = solver.outcome
-        assert outcome is not None  # set once iterate() has returned (the Solver contract)
+        outcome = yield from self._solver_run(problem, y0, offset, lambda it: replace(it, refinement=attempt))
         if outcome.final is not None:
             self.last = replace(outcome.final, refinement=attempt)
         return outcome
@@ -281,20 +356,16 @@ class Candidate:
                 nodes.append(np.tile(np.concatenate([a, np.zeros(full.nv)]), (full.phase_intervals, 1)))
                 controls.append(np.zeros((full.phase_intervals, full.nv)))
                 continue
-            solver = make_solver(phase.settings.solver, phase, None, jacobian=self.jacobian, iteration_offset=offset)
-            try:
-                for it in solver.iterate():
-                    it = replace(it, cost=full.cost_bound, tf=full.time_bound, cost_bound=full.cost_bound, warm_up=True)
-                    self.last = it
-                    self.history.append(it.cost)
-                    self.violations.append(it.constraint_violation)
-                    self.refinements.append(0)
-                    yield it
-            finally:
-                solver.close()
-                self._seconds += solver.outcome.seconds if solver.outcome else 0.0
+            outcome = yield from self._solver_run(
+                phase,
+                None,
+                offset,
+                lambda it: replace(
+                    it, cost=full.cost_bound, tf=full.time_bound, cost_bound=full.cost_bound, warm_up=True, refinement=0
+                ),
+            )
             offset = self.last.iteration if self.last is not None else offset
-            final = solver.outcome.final if solver.outcome else None
+            final = outcome.final
             if final is None or final.constraint_violation > phase.settings.constraint_tolerance:
                 return None, offset
             tf, phase_nodes, phase_controls = phase.unpack(final.y)
@@ -462,4 +533,10 @@ def make_candidate(scenario: Scenario, spec: CandidateSpec) -> Candidate:
     problem = composition_problem(
         spec.composition, scenario.catalog, scenario.task, spec.q_start, spec.q_goal, scenario.optimizer, spec.q_via
     )
-    return Candidate(problem, spec.name, composition=spec.composition.name, boundary_pair=spec.boundary_pair)
+    return Candidate(
+        problem,
+        spec.name,
+        composition=spec.composition.name,
+        boundary_pair=spec.boundary_pair,
+        resume=spec.checkpoint,
+    )

@@ -25,16 +25,29 @@ import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import scipy
 from scipy import sparse
 from scipy.optimize import SR1, Bounds, NonlinearConstraint, minimize
 
 from ..exceptions import ProblemError, SolverReuseError
 from ._scipy import install, solver_thread
+from ._scipy.checkpoint import Session, TrustConstrState, session
 from .shooting import ShootingProblem
 
-__all__ = ["Iterate", "SolverOutcome", "ShootingSolver", "STATUSES", "HESSIANS", "ITERATION_LIMIT", "complementarity"]
+__all__ = [
+    "Iterate",
+    "SolverOutcome",
+    "ShootingSolver",
+    "TrustConstrState",
+    "STATUSES",
+    "HESSIANS",
+    "ITERATION_LIMIT",
+    "complementarity",
+    "resumable",
+]
 
 #: How the reason of a solve that stopped at its iteration limit begins.
 ITERATION_LIMIT = "iteration limit"
@@ -143,6 +156,11 @@ class ShootingSolver:
         transcription; otherwise ``sr1`` is used).
     iteration_offset
         Added to reported iteration numbers (refinement continues a count).
+    resume
+        A :meth:`checkpoint` of a solve of the same problem by a solver made with the same
+        arguments (``y0`` aside): this solve goes on from there, through the iterates the stopped
+        one would have taken; its first iterate is the one after the checkpoint's. Needs the
+        project's SQP loop in trust-constr (:func:`resumable`).
     """
 
     def __init__(
@@ -156,6 +174,7 @@ class ShootingSolver:
         jacobian: str = "exact",
         iteration_offset: int = 0,
         hessian: str = "sr1",
+        resume: TrustConstrState | None = None,
     ):
         if jacobian not in ("exact", "finite-difference"):
             raise ProblemError(f"jacobian must be 'exact' or 'finite-difference', got {jacobian!r}")
@@ -164,8 +183,18 @@ class ShootingSolver:
         self.hessian = hessian
         s = problem.settings
         self.problem = problem
-        self.warm = y0 is not None
-        self.y0 = problem.initial_guess() if y0 is None else np.asarray(y0, dtype=float).copy()
+        if resume is not None and not resumable(resume):
+            raise ProblemError(
+                "a checkpoint needs the project's SQP loop in trust-constr and the SciPy it was taken with "
+                f"({resume.arrays.get('solver.scipy', '?')}; this is {scipy.__version__})"
+            )
+        self._checkpoint = resume
+        if resume is not None:
+            self.warm = bool(resume.arrays["solver.warm"])
+            self.y0 = resume.x
+        else:
+            self.warm = y0 is not None
+            self.y0 = problem.initial_guess() if y0 is None else np.asarray(y0, dtype=float).copy()
         self.max_iterations = max_iterations or s.max_iterations
         self.tolerance = tolerance or s.tolerance
         self.constraint_tolerance = constraint_tolerance or s.constraint_tolerance
@@ -179,8 +208,11 @@ class ShootingSolver:
         self._resume = threading.Semaphore(0)
         self._stop = False
         self._direct = False
-        self._seconds = 0.0
+        self._seconds = 0.0 if resume is None else resume.scalar("solver.seconds")
         self._clock = 0.0  # perf_counter() when the solver last took over from the caller
+        self._session: Session | None = None
+        #: A resumed solve's first callback is the checkpoint's iteration again (not yielded).
+        self._again = resume is not None
 
     # -- public ------------------------------------------------------------------------------
     def iterate(self) -> Iterator[Iterate]:
@@ -248,6 +280,22 @@ class ShootingSolver:
         self.outcome = self._posted() or self._outcome_without_result("failed", "the solver ended without an outcome")
         return self.outcome
 
+    def checkpoint(self) -> TrustConstrState | None:
+        """trust-constr's state after the last iterate :meth:`iterate` yielded, while the solve
+        waits there, for a solver made with ``resume=`` (None when there is none: not waiting at
+        an iterate, ended, run by :meth:`solve`, or SciPy's own SQP loop in place)."""
+        if self._session is None or self.outcome is not None or self.last is None or self._direct:
+            return None
+        state = self._session.capture()
+        if state is None:
+            return None
+        extra: dict[str, Any] = {
+            "solver.warm": np.bool_(self.warm),
+            "solver.seconds": np.float64(self._seconds),
+            "solver.scipy": np.str_(scipy.__version__),
+        }
+        return TrustConstrState({**state.arrays, **extra})
+
     # -- internals ---------------------------------------------------------------------------
     def _shutdown(self) -> None:
         thread = self._thread
@@ -291,6 +339,12 @@ class ShootingSolver:
     def _callback(self, intermediate_result) -> bool:
         state = intermediate_result  # scipy passes the new-style result only under this name
         self._seconds += time.perf_counter() - self._clock
+        if self._again:  # (the checkpoint's iterate, yielded by the solve it was taken from)
+            self._again = False
+            self._clock = time.perf_counter()
+            if self._stop:
+                raise StopIteration
+            return False
         problem = self.problem
         y = np.array(state.x, dtype=float)
         tf = problem.motion_time(y)
@@ -318,7 +372,8 @@ class ShootingSolver:
         self._clock = time.perf_counter()
         try:
             install()  # the replacements of parts of trust-constr, once per process
-            with solver_thread(problem.n_variables):
+            with solver_thread(problem.n_variables), session(self._checkpoint) as current:
+                self._session = current
                 result = self._minimize()
         except Exception as exc:
             logger.debug("solver for %s failed", problem.robot.name, exc_info=True)
@@ -413,6 +468,11 @@ class ShootingSolver:
             options.update(initial_tr_radius=0.1, initial_barrier_parameter=WARM_BARRIER)
         else:
             options.update(initial_barrier_parameter=COLD_BARRIER, initial_barrier_tolerance=COLD_BARRIER)
+        if self._checkpoint is not None:  # the subproblem in progress (later ones follow from it)
+            options.update(
+                initial_barrier_parameter=self._checkpoint.scalar("barrier_parameter"),
+                initial_barrier_tolerance=self._checkpoint.scalar("barrier_tolerance"),
+            )
         # Floating-point warnings through NumPy's error state, which is per thread: a warnings
         # filter held for the whole solve would be restored out of order by the lockstep's threads.
         with np.errstate(all="ignore"):
@@ -438,6 +498,15 @@ def _bounds(problem: ShootingProblem) -> Bounds:
     if problem.phases > 1:
         keep[problem.duration_columns] = True
     return Bounds(problem.variable_lower, problem.variable_upper, keep_feasible=keep)
+
+
+def resumable(state: TrustConstrState | None = None) -> bool:
+    """Whether a solve can be resumed here from a :meth:`ShootingSolver.checkpoint` (``state``, if
+    given): the project's SQP loop is in trust-constr (:func:`~modular_robots.ocp._scipy.install`),
+    and the state was taken with this SciPy (whose objects it fills in)."""
+    if state is not None and str(state.arrays.get("solver.scipy", "")) != scipy.__version__:
+        return False
+    return "SQP loop" in install()
 
 
 class _SR1(SR1):

@@ -19,7 +19,7 @@ from ..exceptions import ProblemError
 from .shooting import ShootingProblem
 from .solver import Iterate, ShootingSolver, SolverOutcome
 
-__all__ = ["Solver", "SolverFactory", "SOLVERS", "make_solver", "UnknownSolverError"]
+__all__ = ["Solver", "SolverFactory", "SOLVERS", "RESUMABLE", "make_solver", "UnknownSolverError"]
 
 
 @runtime_checkable
@@ -77,6 +77,9 @@ class SolverFactory(Protocol):
 
 #: Every solver, by its name in a scenario's ``optimizer.solver``.
 SOLVERS: dict[str, SolverFactory] = {"trust-constr": ShootingSolver}
+#: The solvers that can stop at an iterate and go on later, in another process: a ``checkpoint()``
+#: method (None when there is none to take) and a factory's ``resume=`` taking what it returned.
+RESUMABLE = frozenset({"trust-constr"})
 
 
 class UnknownSolverError(ProblemError):
@@ -90,9 +93,15 @@ def make_solver(
     *,
     jacobian: str = "exact",
     iteration_offset: int = 0,
+    resume: object | None = None,
 ) -> Solver:
-    """The solver called ``name`` for ``problem`` (see :class:`SolverFactory`)."""
+    """The solver called ``name`` for ``problem`` (see :class:`SolverFactory`); with ``resume``,
+    a solver's ``checkpoint()``, the solve that goes on from it (:data:`RESUMABLE` solvers)."""
     factory = SOLVERS.get(name)
     if factory is None:
         raise UnknownSolverError(f"unknown solver {name!r}; expected one of {list(SOLVERS)}")
-    return factory(problem, y0, jacobian=jacobian, iteration_offset=iteration_offset)
+    if resume is None:
+        return factory(problem, y0, jacobian=jacobian, iteration_offset=iteration_offset)
+    if name not in RESUMABLE:
+        raise ProblemError(f"solver {name!r} cannot resume a stopped solve")
+    return factory(problem, y0, jacobian=jacobian, iteration_offset=iteration_offset, resume=resume)  # type: ignore[call-arg]

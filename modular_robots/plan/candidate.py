@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
@@ -73,6 +74,10 @@ class CandidateResult:
     urdf: str | None = field(default=None, repr=False, compare=False)
     #: The drives' armature and friction, which URDF cannot hold (:meth:`RobotModel.drive`).
     drive: dict | None = field(default=None, repr=False, compare=False)
+    #: Where a candidate stopped at an iterate stands (a
+    #: :class:`~modular_robots.ocp.resume.CandidateCheckpoint`), for a later run to go on from;
+    #: None otherwise (a pruned result drops it).
+    checkpoint: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
     def never_started(cls, name: str, reason: str = "stopped before it started") -> CandidateResult:
@@ -89,6 +94,7 @@ class CandidateResult:
         """This result, pruned at ``iteration`` for ``reason`` (which rule, which bound or ratio)."""
         return replace(
             self,
+            checkpoint=None,
             status=CandidateStatus.PRUNED,
             reason=f"pruned at iteration {iteration}" + (f" by the {reason}" if reason else ""),
             pruned_at_iteration=iteration,

@@ -8,8 +8,10 @@ replacement (:mod:`~modular_robots.ocp._scipy.projections` (with
 :mod:`~modular_robots.ocp._scipy.canonical`, :mod:`~modular_robots.ocp._scipy.sqp`, a copy of
 SciPy's SQP loop under SciPy's licence, ``LICENSE-scipy.txt`` beside it,
 :mod:`~modular_robots.ocp._scipy.barrier`, :mod:`~modular_robots.ocp._scipy.boxes` and the
-sparse products of :mod:`~modular_robots.ocp._scipy.products`). Nothing outside this package
-reads SciPy's private names (the tests aside).
+sparse products of :mod:`~modular_robots.ocp._scipy.products`), and the checkpoints of a solve
+stopped at an iterate (:mod:`~modular_robots.ocp._scipy.checkpoint`, which reads and fills in
+SciPy's objects without replacing any code). Nothing outside this package reads SciPy's private
+names (the tests aside).
 
 Importing the package replaces nothing: :class:`~modular_robots.ocp.solver.ShootingSolver` calls
 :func:`install` before its first solve. A hook installs only on a SciPy of :data:`TESTED_SCIPY`

@@ -30,6 +30,7 @@ from numpy.linalg import norm
 from scipy.optimize._trustregion_constr import equality_constrained_sqp as _scipy_sqp
 from scipy.optimize._trustregion_constr.qp_subproblem import modified_dogleg, projected_cg
 
+from . import checkpoint
 from .boxes import box_intersections
 from .products import rmatvec
 
@@ -83,10 +84,17 @@ def equality_constrained_sqp(
     if trust_ub is None:
         trust_ub = np.full(n, np.inf)
 
+    session = checkpoint.current_session()
+    resume = session.take_resume() if session is not None else None
     x = np.copy(x0)
     trust_radius = initial_trust_radius
     penalty = initial_penalty
     f, c, b, A = fun0, grad0, constr0, jac0
+    if resume is not None:  # (checkpoint.py) from where a stopped solve was: its values there
+        x = np.array(resume.arrays["z"])
+        trust_radius, penalty = resume.scalar("trust_radius"), resume.scalar("penalty")
+        f, b = fun_and_constr(x)
+        c, A = grad_and_jac(x)
     S = scaling(x)
     try:
         Z, LS, Y = projections(A, factorization_method)
@@ -106,9 +114,16 @@ def equality_constrained_sqp(
     cg_info = {"niter": 0, "stop_cond": 0, "hits_boundary": False}
 
     last_iteration_failed = False
-    while not stop_criteria(
-        state, x, last_iteration_failed, optimality, constr_violation, trust_radius, penalty, cg_info
-    ):
+    if resume is not None:
+        assert session is not None  # (it gave the state)
+        session.restore(resume, stop_criteria, state)
+        last_iteration_failed = bool(resume.arrays["last_iteration_failed"])
+        cg_info = checkpoint.cg_info(resume)
+    while True:
+        if session is not None:
+            session.note(x, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state)
+        if stop_criteria(state, x, last_iteration_failed, optimality, constr_violation, trust_radius, penalty, cg_info):
+            break
         # Normal step: minimise ||A dn + b|| within a shrunk trust region and box.
         dn = modified_dogleg(A, Y, b, TR_FACTOR * trust_radius, BOX_FACTOR * trust_lb, BOX_FACTOR * trust_ub)
         # Tangential step: the quadratic model in the null space of A.

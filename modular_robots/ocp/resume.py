@@ -1,0 +1,215 @@
+"""Where a stopped candidate was, so that a later run goes on from there (:class:`CandidateCheckpoint`).
+
+A :class:`~modular_robots.ocp.candidate.Candidate` chains solver runs (its moves alone, the
+continuation stages, a restart at the iteration limit, a swing guess, refinements). Stopped at an
+iterate, it is the runs it ended (their iterates, as it yielded them, and their outcomes) and the
+run in progress (its iterates so far and the solver's state,
+:meth:`~modular_robots.ocp.solver.ShootingSolver.checkpoint`). Made again with the checkpoint, a
+candidate yields the recorded iterates in turn, takes the ended runs' outcomes instead of solving
+them, and resumes the run in progress: step C and step D are deterministic, so it yields and ends
+as the candidate never stopped would have (verification and the problem's refinements between the
+runs are computed again).
+
+The checkpoint is written as named arrays (:func:`save`, :func:`load`: :func:`numpy.savez`,
+read without unpickling).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import warnings
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..exceptions import CheckpointWarning
+from ._scipy.checkpoint import TrustConstrState
+from .solver import Iterate, SolverOutcome
+
+__all__ = ["CandidateCheckpoint", "CheckpointFolder", "SolverRun", "save", "load", "FORMAT"]
+
+#: The layout of a written checkpoint; one of another layout is not read.
+FORMAT = 1
+
+_EMPTY = np.zeros(0)
+#: An iterate's numbers, as rows of a trace (its ``y`` apart).
+_FIELDS = ("iteration", "cost", "constraint_violation", "tf", "optimality", "refinement", "cost_bound", "warm_up")
+
+
+@dataclass(frozen=True, eq=False)
+class SolverRun:
+    """An ended solver run: the iterates the candidate yielded from it (without their decision
+    vectors) and its outcome (whose final iterate keeps its own)."""
+
+    iterates: tuple[Iterate, ...]
+    outcome: SolverOutcome
+
+
+@dataclass(frozen=True, eq=False)
+class CandidateCheckpoint:
+    """A stopped candidate: its ended ``runs``, the run in progress (``iterates`` so far and the
+    solver's ``state``), and the ``seconds`` spent so far (solver and verification)."""
+
+    name: str
+    runs: tuple[SolverRun, ...]
+    iterates: tuple[Iterate, ...]
+    state: TrustConstrState
+    seconds: float
+
+    @property
+    def iteration(self) -> int:
+        """The last iteration it yielded."""
+        return self.iterates[-1].iteration if self.iterates else 0
+
+
+def _rows(iterates) -> np.ndarray:
+    return np.array([[float(getattr(it, name)) for name in _FIELDS] for it in iterates], dtype=float).reshape(
+        -1, len(_FIELDS)
+    )
+
+
+def _iterates(rows: np.ndarray) -> tuple[Iterate, ...]:
+    return tuple(
+        Iterate(
+            iteration=int(row[0]),
+            cost=float(row[1]),
+            constraint_violation=float(row[2]),
+            tf=float(row[3]),
+            y=_EMPTY,
+            optimality=float(row[4]),
+            refinement=int(row[5]),
+            cost_bound=float(row[6]),
+            warm_up=bool(row[7]),
+        )
+        for row in rows
+    )
+
+
+def to_arrays(checkpoint: CandidateCheckpoint) -> dict[str, Any]:
+    """The checkpoint as named arrays."""
+    out: dict[str, Any] = {
+        "format": np.int64(FORMAT),
+        "name": np.str_(checkpoint.name),
+        "seconds": np.float64(checkpoint.seconds),
+        "runs": np.int64(len(checkpoint.runs)),
+        "iterates": _rows(checkpoint.iterates),
+    }
+    for i, run in enumerate(checkpoint.runs):
+        o, key = run.outcome, f"run.{i}."
+        out[key + "iterates"] = _rows(run.iterates)
+        out[key + "status"], out[key + "reason"] = np.str_(o.status), np.str_(o.reason)
+        out[key + "numbers"] = np.array([o.iterations, o.seconds, o.limit_reached, o.complementarity], dtype=float)
+        if o.final is not None:
+            out[key + "final"] = _rows([o.final])
+            out[key + "final.y"] = np.array(o.final.y, dtype=float)
+    out.update({"state." + name: value for name, value in checkpoint.state.arrays.items()})
+    return out
+
+
+def from_arrays(arrays) -> CandidateCheckpoint:
+    """The checkpoint of :func:`to_arrays`'s arrays (ValueError if they are not one)."""
+    if "format" not in arrays or int(arrays["format"]) != FORMAT:
+        raise ValueError("not a candidate checkpoint of this version")
+    runs = []
+    for i in range(int(arrays["runs"])):
+        key = f"run.{i}."
+        final = None
+        if key + "final" in arrays:
+            (final,) = _iterates(arrays[key + "final"])
+            final = Iterate(**{**final.__dict__, "y": np.array(arrays[key + "final.y"], dtype=float)})
+        iterations, seconds, limit_reached, complementarity = (float(v) for v in arrays[key + "numbers"])
+        outcome = SolverOutcome(
+            str(arrays[key + "status"]),
+            str(arrays[key + "reason"]),
+            int(iterations),
+            seconds,
+            final,
+            bool(limit_reached),
+            complementarity,
+        )
+        runs.append(SolverRun(_iterates(arrays[key + "iterates"]), outcome))
+    state = TrustConstrState({name[6:]: np.array(value) for name, value in arrays.items() if name.startswith("state.")})
+    return CandidateCheckpoint(
+        str(arrays["name"]), tuple(runs), _iterates(arrays["iterates"]), state, float(arrays["seconds"])
+    )
+
+
+def save(checkpoint: CandidateCheckpoint, path: Path) -> None:
+    """Write ``checkpoint`` to ``path`` whole or not at all (a stop while writing leaves the file
+    that was there)."""
+    path = Path(path)
+    partial = path.with_name(path.name + ".partial")
+    with open(partial, "wb") as file:
+        np.savez(file, **to_arrays(checkpoint))
+        file.flush()
+        os.fsync(file.fileno())
+    os.replace(partial, path)
+
+
+def load(path: Path) -> CandidateCheckpoint:
+    """The checkpoint written at ``path`` (OSError, ValueError if it cannot be read as one)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return from_arrays({name: data[name] for name in data.files})
+    except (KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: not a candidate checkpoint ({exc})") from exc
+
+
+class CheckpointFolder:
+    """The checkpoints of one search's stopped candidates, a file each in ``folder``, named by the
+    search's ``fingerprint`` (a checkpoint of another search is never read) and the candidate.
+
+    A checkpoint that cannot be written or read is not an error: the candidate then starts from
+    its beginning, as it did before checkpoints (a warning says why)."""
+
+    def __init__(self, folder: Path, fingerprint: str):
+        self.folder = Path(folder)
+        self.fingerprint = fingerprint
+
+    def path(self, name: str) -> Path:
+        digest = hashlib.sha256(name.encode()).hexdigest()[:20]
+        return self.folder / f"{self.fingerprint}-{digest}.npz"
+
+    def load(self, name: str) -> CandidateCheckpoint | None:
+        """Candidate ``name``'s checkpoint, if one was written."""
+        path = self.path(name)
+        if not path.exists():
+            return None
+        try:
+            checkpoint = load(path)
+        except (OSError, ValueError) as exc:
+            warnings.warn(
+                f"{name} starts from its beginning: its checkpoint {path} cannot be read ({exc})",
+                CheckpointWarning,
+                stacklevel=2,
+            )
+            return None
+        return checkpoint if checkpoint.name == name else None
+
+    def save(self, checkpoint: CandidateCheckpoint) -> None:
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            save(checkpoint, self.path(checkpoint.name))
+        except OSError as exc:
+            warnings.warn(
+                f"{checkpoint.name} will start from its beginning in a run that goes on: its checkpoint cannot be "
+                f"written ({exc})",
+                CheckpointWarning,
+                stacklevel=2,
+            )
+
+    def discard(self, name: str) -> None:
+        """Remove candidate ``name``'s checkpoint (it ended)."""
+        with contextlib.suppress(OSError):
+            self.path(name).unlink(missing_ok=True)
+
+    def clear(self) -> None:
+        """Remove every checkpoint of the folder (a search starts afresh there)."""
+        with contextlib.suppress(OSError):
+            for path in self.folder.glob("*.npz"):
+                path.unlink(missing_ok=True)
