@@ -448,11 +448,13 @@ class _Search:
             recorded = {name: (_labelled(manager.results[name], self.specs[name]), None) for name in names}
             self.cut = cut and any(r.status == CandidateStatus.STOPPED for r, _ in recorded.values())
             for name, (result, _) in recorded.items():
-                if self.cut and result.status == CandidateStatus.STOPPED and result.iterations:
-                    if result.iterations <= self.log.cuts.get(name, -1):
+                # (how far it got: a candidate still giving back its checkpoint's iterates keeps it)
+                reached = max(result.iterations, result.checkpoint.iteration if result.checkpoint else 0)
+                if self.cut and result.status == CandidateStatus.STOPPED and reached:
+                    if reached <= self.log.cuts.get(name, -1):
                         self.cut_again.add(name)
-                    self.log.write_checkpoint(manager.results[name])
-                    self.log.write_cut(name, result.iterations)
+                    self.log.write_checkpoint(result)
+                    self.log.write_cut(name, reached)
         for name in names:
             result = recorded[name][0]
             self.results[name] = result
@@ -660,8 +662,14 @@ class _Log:
 
     def __init__(self, out, scenario: Scenario, feasibility: FeasibilitySettings, settings: SearchSettings):
         self.path = Path(out) / STATE if out is not None else None
-        text = repr((scenario.catalog, scenario.task, scenario.optimizer, scenario.pruning, feasibility, settings))
-        self.fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
+        def fingerprint(catalog) -> str:
+            text = repr((catalog, scenario.task, scenario.optimizer, scenario.pruning, feasibility, settings))
+            return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+        # Of the catalogue's modules, not of the path it was read by (relative or absolute); a
+        # record written when the path was part of it is still read.
+        self.fingerprint = fingerprint(replace(scenario.catalog, source=""))
+        self.fingerprints = {self.fingerprint, fingerprint(scenario.catalog)}
         self.checkpoints = CheckpointFolder(Path(out) / CHECKPOINTS, self.fingerprint) if out is not None else None
         self.scenario = scenario
         self.verdicts: dict[tuple[int, str], dict] = {}
@@ -684,7 +692,7 @@ class _Log:
         if (
             not isinstance(header, dict)
             or header.get("search") != FORMAT
-            or header.get("fingerprint") != self.fingerprint
+            or header.get("fingerprint") not in self.fingerprints
         ):
             raise InputError(
                 f"{shorten(self.path, 200, quote=False)}: not the record of a search of this scenario with these "

@@ -15,6 +15,7 @@ import html
 import json
 import math
 import random
+import shutil
 
 import numpy as np
 import pytest
@@ -323,6 +324,21 @@ def test_a_record_of_another_search_is_refused_not_overwritten(scenario, uninter
     with pytest.raises(InputError, match="not the record of a search of this scenario"):
         search_scenario(load_scenario(SMALL), out, jobs=1)
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+
+
+def test_a_search_goes_on_whether_its_scenario_is_named_by_a_relative_or_an_absolute_path(
+    uninterrupted, tmp_path, monkeypatch
+):
+    """The record is of the catalogue's modules, not of the path it was read by: the catalogue's
+    ``source`` differed between ``tests/data/small-fast.yaml`` and its absolute path, and the same
+    search into the same folder was refused as another's."""
+    expected, finished, _ = uninterrupted
+    out = tmp_path / "copy"
+    shutil.copytree(finished, out)
+    monkeypatch.chdir(ROOT)
+    relative = load_scenario(FAST.relative_to(ROOT))
+    assert relative.catalog.source != load_scenario(FAST).catalog.source
+    assert _answers(search_scenario(relative, out, jobs=1)) == _answers(expected)
 
 
 def test_the_certificate_tells_a_bound_from_the_ratio_rule_and_writes_an_unbounded_gap():
