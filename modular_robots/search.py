@@ -241,7 +241,7 @@ class _Search:
         self._take_pass(None, deadline)
         while True:
             self.seconds["search"] = time.perf_counter() - start
-            self._record()
+            self._record(every=1.0)  # (result.json is rewritten at most once a second: the record keeps the work)
             lowest = self._lowest()
             if self.cut:  # candidates stopped at the budget are still open
                 return "budget"
