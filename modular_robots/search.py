@@ -662,6 +662,7 @@ class _Log:
 
     def __init__(self, out, scenario: Scenario, feasibility: FeasibilitySettings, settings: SearchSettings):
         self.path = Path(out) / STATE if out is not None else None
+
         def fingerprint(catalog) -> str:
             text = repr((catalog, scenario.task, scenario.optimizer, scenario.pruning, feasibility, settings))
             return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -9,6 +9,7 @@ several phases) to the unstopped candidate's iterates and result."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -204,9 +205,70 @@ def test_a_candidate_of_several_phases_resumes_after_its_moves(tmp_path):
     assert runs >= 2
 
 
-def test_a_checkpoint_that_cannot_be_read_is_said_and_the_candidate_starts_over(tmp_path):
+def _paper_candidate():
+    scenario = without_floor(load_scenario(PAPER_5KG))
+    composition = Composition.from_name("B-J1-L3-J1-L2-J1-L1-J1-L1-E2", scenario.catalog)
+    return scenario, next(candidate_specs([check_composition(composition, scenario.catalog, scenario.task)]))
+
+
+def test_a_stop_during_an_iteration_keeps_the_iterate_it_ended_on_and_resumes_after_it(tmp_path, monkeypatch):
+    """Ctrl-C in the caller's thread while the solver computes (``--jobs 1``): the iterate that
+    iteration ends on never reaches the caller, and the checkpoint is taken there; the candidate made
+    with it yields that iterate among its own and goes on as the unstopped candidate."""
+    scenario, spec = _paper_candidate()
+    reference = [_candidate_key(it) for it in make_candidate(scenario, spec).iterate()]
+    waits = {"count": 0}
+    receive = ShootingSolver._receive
+
+    def interrupted(self):
+        waits["count"] += 1
+        if waits["count"] == 8:  # once the eighth iterate is on its way, not yet received
+            while self._to_caller.empty():
+                time.sleep(0.001)
+            raise KeyboardInterrupt
+        return receive(self)
+
+    monkeypatch.setattr(ShootingSolver, "_receive", interrupted)
+    first, seen = make_candidate(scenario, spec), []
+    with pytest.raises(KeyboardInterrupt):
+        seen.extend(_candidate_key(it) for it in first.iterate())
+    monkeypatch.undo()
+    first.close()
+    checkpoint = first.result.checkpoint
+    assert len(seen) == 7 and checkpoint is not None and checkpoint.iteration == 8
+    resume_module.save(checkpoint, tmp_path / "late.npz")
+    second = make_candidate(scenario, replace(spec, checkpoint=resume_module.load(tmp_path / "late.npz")))
+    assert [_candidate_key(it) for it in second.iterate()] == reference
+
+
+def test_a_checkpoint_that_cannot_be_used_is_said_and_the_candidate_starts_over(tmp_path, monkeypatch):
+    scenario, spec = _paper_candidate()
+    first = make_candidate(scenario, spec)
+    for it in first.iterate():
+        if it.iteration == 3:
+            break
+    first.close()
+    checkpoint = first.result.checkpoint
     folder = resume_module.CheckpointFolder(tmp_path, "f" * 16)
-    folder.path("robot").write_bytes(b"PK\x03\x04 cut short")
-    with pytest.warns(CheckpointWarning, match="robot starts from its beginning"):
-        assert folder.load("robot") is None
+    arrays = resume_module.to_arrays(checkpoint)
+    damaged = {
+        "cut short": None,
+        "rows of another width": {**arrays, "iterates": arrays["iterates"][:, :3]},
+        "a part of the state missing": {k: v for k, v in arrays.items() if k != "state.penalty"},
+        "another SciPy's": {**arrays, "state.solver.scipy": np.str_("0.1")},
+    }
+    for what, content in damaged.items():
+        path = folder.path(checkpoint.name)
+        if content is None:
+            path.write_bytes(b"PK\x03\x04 cut short")
+        else:
+            np.savez(path, **content)
+        with pytest.warns(CheckpointWarning, match="starts from its beginning"):
+            assert folder.load(checkpoint.name) is None, what
     assert folder.load("another") is None  # none written: no warning
+    # a write that fails leaves neither the new file nor a partial one, and says so
+    folder.discard(checkpoint.name)
+    monkeypatch.setattr(resume_module.np, "savez", lambda *a, **k: (_ for _ in ()).throw(OSError(28, "No space left")))
+    with pytest.warns(CheckpointWarning, match="cannot be written"):
+        folder.save(checkpoint)
+    assert not list(tmp_path.iterdir())

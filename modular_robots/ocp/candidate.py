@@ -147,6 +147,7 @@ class Candidate:
         self._runs: list[SolverRun] = []  # the runs ended (solved here or given back)
         self._iterates: list[Iterate] = []  # of the run in progress, without decision vectors
         self._solver: Solver | None = None  # the run in progress's solver
+        self._late: CandidateCheckpoint | None = None  # taken as a stop ended the run in progress
         if resume is not None:
             self._seconds = resume.seconds
 
@@ -185,6 +186,8 @@ class Candidate:
         ``resume=`` (None: not started, ended, or its solver keeps no state to go on from)."""
         if self.result is not None:
             return None
+        if self._late is not None:
+            return self._late
         if self._resume is not None:  # still giving back the runs of the one it resumes
             return self._resume if self.last is not None else None
         take = getattr(self._solver, "checkpoint", None)
@@ -237,12 +240,25 @@ class Candidate:
         finally:
             self._solver = None
             solver.close()
+            self._keep_late(solver, mark)
             self._seconds += solver.outcome.seconds if solver.outcome else 0.0
         outcome = solver.outcome
         assert outcome is not None  # set once iterate() has returned (the Solver contract)
         self._runs.append(SolverRun(tuple(self._iterates), outcome))
         self._iterates = []
         return outcome
+
+    def _keep_late(self, solver: Solver, mark) -> None:
+        """After a stop that came while an iteration ran (the generator ends by the exception),
+        the checkpoint at the iterate the solver stopped on (with it, if it was never yielded)."""
+        take = getattr(solver, "checkpoint", None)
+        state = (
+            take() if take is not None and solver.outcome is not None and solver.outcome.status == "stopped" else None
+        )
+        if state is not None:
+            unseen = getattr(solver, "unseen", None)
+            iterates = (*self._iterates, *([replace(mark(unseen), y=self._NO_Y)] if unseen is not None else []))
+            self._late = CandidateCheckpoint(self.name, tuple(self._runs), iterates, state, self._seconds)
 
     def _solve(
         self, problem: ShootingProblem, y0: np.ndarray | None, offset: int, attempt: int

@@ -20,7 +20,6 @@ import contextlib
 import hashlib
 import os
 import warnings
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ import numpy as np
 
 from ..exceptions import CheckpointWarning
 from ._scipy.checkpoint import TrustConstrState
-from .solver import Iterate, SolverOutcome
+from .solver import Iterate, SolverOutcome, resumable
 
 __all__ = ["CandidateCheckpoint", "CheckpointFolder", "SolverRun", "save", "load", "FORMAT"]
 
@@ -144,11 +143,16 @@ def save(checkpoint: CandidateCheckpoint, path: Path) -> None:
     that was there)."""
     path = Path(path)
     partial = path.with_name(path.name + ".partial")
-    with open(partial, "wb") as file:
-        np.savez(file, **to_arrays(checkpoint))
-        file.flush()
-        os.fsync(file.fileno())
-    os.replace(partial, path)
+    try:
+        with open(partial, "wb") as file:
+            np.savez(file, **to_arrays(checkpoint))
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(partial, path)
+    except BaseException:  # (a full disk, a signal): no partial file left behind
+        with contextlib.suppress(OSError):
+            partial.unlink(missing_ok=True)
+        raise
 
 
 def load(path: Path) -> CandidateCheckpoint:
@@ -156,8 +160,10 @@ def load(path: Path) -> CandidateCheckpoint:
     try:
         with np.load(path, allow_pickle=False) as data:
             return from_arrays({name: data[name] for name in data.files})
-    except (KeyError, EOFError, zipfile.BadZipFile) as exc:
-        raise ValueError(f"{path}: not a candidate checkpoint ({exc})") from exc
+    except OSError:
+        raise
+    except Exception as exc:  # whatever a damaged or foreign file makes NumPy or the reading raise
+        raise ValueError(f"{path}: not a candidate checkpoint ({type(exc).__name__}: {exc})") from exc
 
 
 class CheckpointFolder:
@@ -182,9 +188,14 @@ class CheckpointFolder:
             return None
         try:
             checkpoint = load(path)
+            if not checkpoint.state.complete:
+                raise ValueError("parts of the solver's state are missing")
+            if not resumable(checkpoint.state):
+                scipy = checkpoint.state.arrays.get("solver.scipy", "?")
+                raise ValueError(f"taken with SciPy {scipy}, or the project's SQP loop is not installed here")
         except (OSError, ValueError) as exc:
             warnings.warn(
-                f"{name} starts from its beginning: its checkpoint {path} cannot be read ({exc})",
+                f"{name} starts from its beginning: its checkpoint {path} cannot be used ({exc})",
                 CheckpointWarning,
                 stacklevel=2,
             )
@@ -211,5 +222,5 @@ class CheckpointFolder:
     def clear(self) -> None:
         """Remove every checkpoint of the folder (a search starts afresh there)."""
         with contextlib.suppress(OSError):
-            for path in self.folder.glob("*.npz"):
+            for path in (*self.folder.glob("*.npz"), *self.folder.glob("*.npz.partial")):
                 path.unlink(missing_ok=True)

@@ -213,6 +213,9 @@ class ShootingSolver:
         self._session: Session | None = None
         #: A resumed solve's first callback is the checkpoint's iteration again (not yielded).
         self._again = resume is not None
+        #: The state a stop found the solve in, taken in its last callback (when not taken before).
+        self._late: tuple[Iterate, TrustConstrState | None] | None = None
+        self._taken: Iterate | None = None  # the iterate :meth:`checkpoint` last took the state at
 
     # -- public ------------------------------------------------------------------------------
     def iterate(self) -> Iterator[Iterate]:
@@ -282,9 +285,27 @@ class ShootingSolver:
 
     def checkpoint(self) -> TrustConstrState | None:
         """trust-constr's state after the last iterate :meth:`iterate` yielded, while the solve
-        waits there, for a solver made with ``resume=`` (None when there is none: not waiting at
-        an iterate, ended, run by :meth:`solve`, or SciPy's own SQP loop in place)."""
-        if self._session is None or self.outcome is not None or self.last is None or self._direct:
+        waits there, for a solver made with ``resume=``; after a stop that came while an iteration
+        ran (Ctrl-C in the caller's thread), the state at the iterate that iteration ended on,
+        which the caller never got (:attr:`unseen`). None when there is none: not waiting at an
+        iterate, ended otherwise, run by :meth:`solve`, or SciPy's own SQP loop in place."""
+        if self._late is not None:
+            return self._late[1]
+        if self.outcome is not None or self.last is None or self._direct:
+            return None
+        self._taken = self.last
+        return self._capture()
+
+    @property
+    def unseen(self) -> Iterate | None:
+        """The iterate a stop during its iteration kept from the caller (None: none), which
+        :meth:`checkpoint` is then taken at."""
+        if self._late is None or self._late[0] is self.last:
+            return None
+        return self._late[0]
+
+    def _capture(self) -> TrustConstrState | None:
+        if self._session is None:
             return None
         state = self._session.capture()
         if state is None:
@@ -364,6 +385,8 @@ class ShootingSolver:
             self._resume.acquire()
         self._clock = time.perf_counter()
         if self._stop:
+            if self._taken is not iterate:  # (a stop that came while this or the last iteration ran)
+                self._late = (iterate, self._capture())
             raise StopIteration
         return False
 
@@ -503,8 +526,8 @@ def _bounds(problem: ShootingProblem) -> Bounds:
 def resumable(state: TrustConstrState | None = None) -> bool:
     """Whether a solve can be resumed here from a :meth:`ShootingSolver.checkpoint` (``state``, if
     given): the project's SQP loop is in trust-constr (:func:`~modular_robots.ocp._scipy.install`),
-    and the state was taken with this SciPy (whose objects it fills in)."""
-    if state is not None and str(state.arrays.get("solver.scipy", "")) != scipy.__version__:
+    and the state is whole and was taken with this SciPy (whose objects it fills in)."""
+    if state is not None and (str(state.arrays.get("solver.scipy", "")) != scipy.__version__ or not state.complete):
         return False
     return "SQP loop" in install()
 

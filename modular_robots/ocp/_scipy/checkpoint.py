@@ -48,6 +48,23 @@ _local = threading.local()
 _RESULT_SCALARS = ("nit", "cg_niter", "fun", "optimality", "constr_violation")
 _RESULT_ARRAYS = ("x", "grad", "lagrangian_grad")
 _RESULT_LISTS = ("v", "constr")
+#: What every state holds (a file without one of them is not a state to resume from).
+REQUIRED = (
+    "z",
+    "trust_radius",
+    "penalty",
+    "last_iteration_failed",
+    "cg.niter",
+    "cg.stop_cond",
+    "cg.hits_boundary",
+    "barrier_parameter",
+    "barrier_tolerance",
+    *(f"result.{name}" for name in (*_RESULT_SCALARS, *_RESULT_ARRAYS)),
+    "result.v.0",
+    "result.constr.0",
+)
+#: What each quasi-Newton wrapper's state holds, beside its point (``wrapper.<i>.x``).
+_WRAPPER_REQUIRED = ("H_updated", "first_iteration")
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +77,15 @@ class TrustConstrState:
     def iteration(self) -> int:
         """The iteration it was taken at (trust-constr's count)."""
         return int(self.arrays["result.nit"])
+
+    @property
+    def complete(self) -> bool:
+        """Whether it holds every part a resumption reads (one read from a damaged file may not)."""
+        names = set(self.arrays)
+        wrappers = [name[: -len("x")] for name in names if name.startswith("wrapper.") and name.endswith(".x")]
+        return all(name in names for name in REQUIRED) and all(
+            prefix + part in names for prefix in wrappers for part in _WRAPPER_REQUIRED
+        )
 
     @property
     def x(self) -> np.ndarray:
