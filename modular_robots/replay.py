@@ -16,40 +16,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any
 
-import numpy as np
-
 from .execution import Executor
+from .ocp.resume import NO_Y
+from .ocp.resume import trace_from_rows as trace_from_json
+from .ocp.resume import trace_rows as trace_json
 from .ocp.solver import Iterate
 from .plan.candidate import CandidateResult
 
 __all__ = ["ReplayingExecutor", "trace_json", "trace_from_json"]
-
-_EMPTY = np.zeros(0)
-#: The fields of an iterate that step D reads (:class:`~modular_robots.pruning.PruningManager`).
-_FIELDS = ("iteration", "cost", "constraint_violation", "tf", "refinement", "cost_bound", "warm_up")
-
-
-def trace_json(trace: Sequence[Iterate]) -> list[list[float]]:
-    """A trace as rows of :data:`_FIELDS` (JSON numbers; inf and nan as Python's json writes them)."""
-    return [[float(getattr(it, name)) for name in _FIELDS] for it in trace]
-
-
-def trace_from_json(rows: Sequence[Sequence[float]]) -> list[Iterate]:
-    """The iterates of :func:`trace_json`'s rows (without the decision vector, which step D does
-    not read; a row without ``warm_up``, written before it existed, is not one)."""
-    return [
-        Iterate(
-            iteration=int(row[0]),
-            cost=row[1],
-            constraint_violation=row[2],
-            tf=row[3],
-            y=_EMPTY,
-            refinement=int(row[4]),
-            cost_bound=row[5],
-            warm_up=len(row) > 6 and bool(row[6]),
-        )
-        for row in rows
-    ]
 
 
 class ReplayingExecutor:
@@ -86,7 +60,7 @@ class ReplayingExecutor:
                 out[name] = (False, trace[k]) if k < len(trace) else (True, result)
             ended, value = out[name]
             if not ended:
-                self.traces[name].append(replace(value, y=_EMPTY))
+                self.traces[name].append(replace(value, y=NO_Y))
         return out
 
     def stop(self, names: Sequence[str]) -> dict[str, Any]:

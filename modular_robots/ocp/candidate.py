@@ -30,7 +30,7 @@ from ..robot import robot_model
 from ..scenario import OptimizerSettings, Scenario, Task
 from .ends import task_ends
 from .guess import swing_path
-from .resume import CandidateCheckpoint, SolverRun
+from .resume import NO_Y, CandidateCheckpoint, SolverRun
 from .route import task_route
 from .shooting import ShootingProblem
 from .solver import Iterate, SolverOutcome, resumable
@@ -109,8 +109,6 @@ class Candidate:
         ends as that one would have had it not been stopped (:mod:`~modular_robots.ocp.resume`),
         without solving again what it had solved. Ignored where the solver cannot resume.
     """
-
-    _NO_Y = np.zeros(0)
 
     def __init__(
         self,
@@ -234,7 +232,7 @@ class Candidate:
         try:
             for it in solver.iterate():
                 it = mark(it)
-                self._iterates.append(replace(it, y=self._NO_Y))
+                self._iterates.append(replace(it, y=NO_Y))
                 self._step(it)
                 yield it
         finally:
@@ -257,7 +255,7 @@ class Candidate:
         )
         if state is not None:
             unseen = getattr(solver, "unseen", None)
-            iterates = (*self._iterates, *([replace(mark(unseen), y=self._NO_Y)] if unseen is not None else []))
+            iterates = (*self._iterates, *([replace(mark(unseen), y=NO_Y)] if unseen is not None else []))
             self._late = CandidateCheckpoint(self.name, tuple(self._runs), iterates, state, self._seconds)
 
     def _solve(

@@ -20,7 +20,8 @@ import contextlib
 import hashlib
 import os
 import warnings
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,14 +31,50 @@ from ..exceptions import CheckpointWarning
 from ._scipy.checkpoint import TrustConstrState
 from .solver import Iterate, SolverOutcome, resumable
 
-__all__ = ["CandidateCheckpoint", "CheckpointFolder", "SolverRun", "save", "load", "FORMAT"]
+__all__ = [
+    "CandidateCheckpoint",
+    "CheckpointFolder",
+    "SolverRun",
+    "save",
+    "load",
+    "trace_rows",
+    "trace_from_rows",
+    "TRACE_FIELDS",
+    "NO_Y",
+    "FORMAT",
+]
 
 #: The layout of a written checkpoint; one of another layout is not read.
-FORMAT = 1
+FORMAT = 2
 
-_EMPTY = np.zeros(0)
-#: An iterate's numbers, as rows of a trace (its ``y`` apart).
-_FIELDS = ("iteration", "cost", "constraint_violation", "tf", "optimality", "refinement", "cost_bound", "warm_up")
+#: The decision vector of an iterate given back from a record (step D and the candidate never read it).
+NO_Y = np.zeros(0)
+#: The numbers of an iterate a trace keeps (its ``y`` apart): what step D reads
+#: (:class:`~modular_robots.pruning.PruningManager`) and a resumed candidate yields again.
+TRACE_FIELDS = ("iteration", "cost", "constraint_violation", "tf", "refinement", "cost_bound", "warm_up")
+
+
+def trace_rows(trace: Sequence[Iterate]) -> list[list[float]]:
+    """Iterates as rows of :data:`TRACE_FIELDS` (floats; JSON numbers as Python's json writes them)."""
+    return [[float(getattr(it, name)) for name in TRACE_FIELDS] for it in trace]
+
+
+def trace_from_rows(rows: Sequence[Sequence[float]] | np.ndarray) -> list[Iterate]:
+    """The iterates of :func:`trace_rows`'s rows, without their decision vectors (a row without
+    ``warm_up``, written before it existed, is not one)."""
+    return [
+        Iterate(
+            iteration=int(row[0]),
+            cost=float(row[1]),
+            constraint_violation=float(row[2]),
+            tf=float(row[3]),
+            y=NO_Y,
+            refinement=int(row[4]),
+            cost_bound=float(row[5]),
+            warm_up=len(row) > 6 and bool(row[6]),
+        )
+        for row in rows
+    ]
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,26 +104,11 @@ class CandidateCheckpoint:
 
 
 def _rows(iterates) -> np.ndarray:
-    return np.array([[float(getattr(it, name)) for name in _FIELDS] for it in iterates], dtype=float).reshape(
-        -1, len(_FIELDS)
-    )
+    return np.array(trace_rows(iterates), dtype=float).reshape(-1, len(TRACE_FIELDS))
 
 
 def _iterates(rows: np.ndarray) -> tuple[Iterate, ...]:
-    return tuple(
-        Iterate(
-            iteration=int(row[0]),
-            cost=float(row[1]),
-            constraint_violation=float(row[2]),
-            tf=float(row[3]),
-            y=_EMPTY,
-            optimality=float(row[4]),
-            refinement=int(row[5]),
-            cost_bound=float(row[6]),
-            warm_up=bool(row[7]),
-        )
-        for row in rows
-    )
+    return tuple(trace_from_rows(rows))
 
 
 def to_arrays(checkpoint: CandidateCheckpoint) -> dict[str, Any]:
@@ -120,7 +142,7 @@ def from_arrays(arrays) -> CandidateCheckpoint:
         final = None
         if key + "final" in arrays:
             (final,) = _iterates(arrays[key + "final"])
-            final = Iterate(**{**final.__dict__, "y": np.array(arrays[key + "final.y"], dtype=float)})
+            final = replace(final, y=np.array(arrays[key + "final.y"], dtype=float))
         iterations, seconds, limit_reached, complementarity = (float(v) for v in arrays[key + "numbers"])
         outcome = SolverOutcome(
             str(arrays[key + "status"]),
