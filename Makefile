@@ -58,7 +58,7 @@ clean:
 
 test-scipy-low: .venv-scipy-low/.stamp
 	.venv-scipy-low/bin/python -m pytest -q -p no:cacheprovider tests/test_scipy_hooks.py tests/test_trust_constr.py \
-		tests/test_sqp.py tests/test_checkpoint.py::test_a_resumed_solve_is_the_unstopped_one_to_its_optimum \
+		tests/test_sqp.py tests/test_stall.py tests/test_checkpoint.py::test_a_resumed_solve_is_the_unstopped_one_to_its_optimum \
 		tests/test_checkpoint.py::test_a_quasi_newton_objective_and_the_structured_hessian_resume_alike \
 		tests/test_checkpoint.py::test_a_crawl_to_the_iteration_limit_with_refused_steps_resumes_alike \
 		tests/test_canonical.py tests/test_projections.py tests/test_projections_banded.py \

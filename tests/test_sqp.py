@@ -32,13 +32,17 @@ def problem():
     return paper_problem()
 
 
-def with_corrections(monkeypatch, max_corrections: int) -> dict:
-    """Make solver threads run :data:`LOOP` with ``max_corrections``; count its calls."""
+#: The loop's parameters at which it is SciPy's.
+SCIPYS = {"max_corrections": 1, "stall_iterations": 0}
+
+
+def with_settings(monkeypatch, **settings) -> dict:
+    """Make solver threads run :data:`LOOP` with ``settings``; count its calls."""
     calls = {"loops": 0}
 
     def loop(*args, **kwargs):
         calls["loops"] += 1
-        return LOOP(*args, **kwargs, max_corrections=max_corrections)
+        return LOOP(*args, **kwargs, **settings)
 
     monkeypatch.setattr(sqp, "equality_constrained_sqp", loop)
     return calls
@@ -48,8 +52,8 @@ def with_scipys_loop(monkeypatch) -> None:
     monkeypatch.setattr(tr_interior_point, "equality_constrained_sqp", trust_constr.scipy_sqp_loop)
 
 
-def test_with_one_correction_the_loop_is_scipys_iterate_for_iterate(monkeypatch, problem):
-    calls = with_corrections(monkeypatch, 1)
+def test_with_scipys_settings_the_loop_is_scipys_iterate_for_iterate(monkeypatch, problem):
+    calls = with_settings(monkeypatch, **SCIPYS)
     ours = history(problem)
     assert calls["loops"] >= 3 and ours[0] > 10  # one loop per barrier parameter: the copy ran
     with_scipys_loop(monkeypatch)
@@ -59,7 +63,7 @@ def test_with_one_correction_the_loop_is_scipys_iterate_for_iterate(monkeypatch,
 def test_repeated_corrections_reach_the_same_verified_optimum(monkeypatch, problem):
     ours = ShootingSolver(problem).solve()
     repeated = history(problem)
-    with_corrections(monkeypatch, 1)
+    with_settings(monkeypatch, max_corrections=1)
     assert history(problem) != repeated  # a correction past the first was taken on the way
     monkeypatch.undo()
     with_scipys_loop(monkeypatch)

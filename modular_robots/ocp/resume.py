@@ -44,8 +44,9 @@ __all__ = [
     "FORMAT",
 ]
 
-#: The layout of a written checkpoint; one of another layout is not read.
-FORMAT = 2
+#: The layout of a written checkpoint; one of another layout is not read (3: the stall test's
+#: window, ``state.stall.window``, is part of the solver's state).
+FORMAT = 3
 
 #: The decision vector of an iterate given back from a record (step D and the candidate never read it).
 NO_Y = np.zeros(0)

@@ -421,7 +421,8 @@ class ShootingSolver:
                 result,
             )
         else:
-            self._finish("optimal", str(result.message), result)
+            stalled = self._session.stalled if self._session is not None else None
+            self._finish("optimal", stalled or str(result.message), result)
 
     def _finish(self, status: str, reason: str, result=None, limit_reached: bool = False) -> None:
         self._seconds += time.perf_counter() - self._clock

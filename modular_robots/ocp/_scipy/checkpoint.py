@@ -9,7 +9,8 @@ trust-constr carries from one iteration to the next and cannot compute again:
 - the SQP loop's point ``z = (x, s)`` (variables and slacks), trust radius, penalty, and whether
   the last step was refused, with the conjugate-gradient report the iteration's stopping test
   was given;
-- the barrier parameter and tolerance of the subproblem in progress;
+- the barrier parameter and tolerance of the subproblem in progress, and the barrier function's
+  last values its stall test has seen (:mod:`~modular_robots.ocp._scipy.stall`);
 - the result SciPy carries (counts, the last accepted point's values and multipliers);
 - each quasi-Newton (SR1) matrix, with the point, the multipliers and the point before it that
   its wrapper's next update starts from.
@@ -40,6 +41,8 @@ from scipy import sparse
 from scipy.optimize import HessianUpdateStrategy
 from scipy.optimize._differentiable_functions import ScalarFunction, VectorFunction
 
+from .stall import closure_values
+
 __all__ = ["TrustConstrState", "Session", "session", "current_session"]
 
 _local = threading.local()
@@ -59,6 +62,7 @@ REQUIRED = (
     "cg.hits_boundary",
     "barrier_parameter",
     "barrier_tolerance",
+    "stall.window",
     *(f"result.{name}" for name in (*_RESULT_SCALARS, *_RESULT_ARRAYS)),
     "result.v.0",
     "result.constr.0",
@@ -102,10 +106,13 @@ class Session:
     def __init__(self, resume: TrustConstrState | None = None):
         self.resume = resume
         self._noted: tuple | None = None
+        #: Why the SQP loop ended the solve on a stall (None: it did not).
+        self.stalled: str | None = None
 
-    def note(self, z, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state) -> None:
-        """The SQP loop's state, before its stopping test (references, taken as they are)."""
-        self._noted = (z, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state)
+    def note(self, z, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state, stall) -> None:
+        """The SQP loop's state, before its stopping test (references, taken as they are;
+        ``stall`` its :class:`~modular_robots.ocp._scipy.stall.StallTest`)."""
+        self._noted = (z, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state, stall)
 
     def take_resume(self) -> TrustConstrState | None:
         """The state to resume from, once (the first SQP loop of the solve takes it)."""
@@ -117,7 +124,7 @@ class Session:
         the SQP loop noted one, or where SciPy's objects are not those expected)."""
         if self._noted is None:
             return None
-        z, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state = self._noted
+        z, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state, stall = self._noted
         try:
             subproblem = stop_criteria.__self__
             objective, constraints = _wrappers(subproblem.global_stop_criteria)
@@ -131,6 +138,7 @@ class Session:
                 "cg.hits_boundary": np.bool_(cg_info["hits_boundary"]),
                 "barrier_parameter": np.float64(subproblem.barrier_parameter),
                 "barrier_tolerance": np.float64(subproblem.tolerance),
+                "stall.window": stall.state(),
             }
             for name in _RESULT_SCALARS:
                 arrays[f"result.{name}"] = np.asarray(state[name])
@@ -188,11 +196,15 @@ def cg_info(resume: TrustConstrState) -> dict[str, Any]:
     }
 
 
+def stall_window(resume: TrustConstrState) -> np.ndarray:
+    """The barrier function's values the state's stall test had seen."""
+    return np.asarray(resume.arrays["stall.window"], dtype=float)
+
+
 def _wrappers(global_stop_criteria) -> tuple[Any, list[Any]]:
     """trust-constr's objective and the functions of its constraints, from its stopping test's
     closure (SciPy keeps them nowhere else)."""
-    code, cells = global_stop_criteria.__code__, global_stop_criteria.__closure__
-    found = dict(zip(code.co_freevars, (cell.cell_contents for cell in cells or ()), strict=True))
+    found = closure_values(global_stop_criteria)
     return found["objective"], [c.fun for c in found["prepared_constraints"]]
 
 

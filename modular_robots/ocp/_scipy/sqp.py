@@ -1,17 +1,23 @@
-"""trust-constr's Byrd-Omojokun SQP loop, with repeated second-order corrections.
+"""trust-constr's Byrd-Omojokun SQP loop, with repeated second-order corrections and a stall test.
 
 SciPy's ``equality_constrained_sqp`` (SciPy 1.17, ``scipy/optimize/_trustregion_constr/
 equality_constrained_sqp.py``; Copyright (c) 2001-2002 Enthought, Inc., 2003 SciPy Developers;
 BSD-3-Clause, ``LICENSE-scipy.txt`` beside this file), which trust-constr's interior-point method
-calls once per barrier parameter, with one change. When the merit function refuses a step, SciPy
-tries one second-order correction (a least-norm step back onto the linearised constraints,
-``-Y c(x + d)``) and gives up if the merit function refuses that too. Here the correction is
-repeated, each from the constraint values at the last corrected point, up to
-:data:`MAX_CORRECTIONS` times in all, while each one shrinks the constraint violation by at least
-:data:`CONTRACTION` (IPOPT's ``max_soc`` and ``kappa_soc``). Near the optimum a step along the
-constraints' null space bends inactive torque rows by more than one correction removes, so the
-step was refused and the trust radius cut to a tenth, and a solve crawled
-(``docs/design-notes.md``). With ``max_corrections=1`` the loop is SciPy's, iterate for iterate
+calls once per barrier parameter, with two changes, each a parameter of the loop:
+
+- ``max_corrections``. When the merit function refuses a step, SciPy tries one second-order
+  correction (a least-norm step back onto the linearised constraints, ``-Y c(x + d)``) and gives
+  up if the merit function refuses that too. Here the correction is repeated, each from the
+  constraint values at the last corrected point, up to :data:`MAX_CORRECTIONS` times in all,
+  while each one shrinks the constraint violation by at least :data:`CONTRACTION` (IPOPT's
+  ``max_soc`` and ``kappa_soc``). Near the optimum a step along the constraints' null space bends
+  inactive torque rows by more than one correction removes, so the step was refused and the trust
+  radius cut to a tenth, and a solve crawled (``docs/design-notes.md``).
+- ``stall_iterations``. A barrier subproblem that no longer makes progress ends
+  (:class:`~modular_robots.ocp._scipy.stall.StallTest`), as SciPy's ``xtol`` test ends one whose
+  trust radius has collapsed, sooner.
+
+With ``max_corrections=1`` and ``stall_iterations=0`` the loop is SciPy's, iterate for iterate
 (``tests/test_sqp.py``). The optimality's ``A^T v`` is taken by SciPy's kernel without building
 ``A^T`` (:func:`~modular_robots.ocp._scipy.products.rmatvec`, bit for bit the same).
 
@@ -33,14 +39,23 @@ from scipy.optimize._trustregion_constr.qp_subproblem import modified_dogleg, pr
 from . import checkpoint
 from .boxes import box_intersections
 from .products import rmatvec
+from .stall import STALL_ITERATIONS, StallTest
 
-__all__ = ["equality_constrained_sqp", "MAX_CORRECTIONS", "CONTRACTION"]
+__all__ = [
+    "equality_constrained_sqp",
+    "MAX_CORRECTIONS",
+    "CONTRACTION",
+    "STALL_ITERATIONS",
+    "EXTRA_PARAMETERS",
+]
 
 #: Second-order corrections tried per refused step, the first (SciPy's) included: IPOPT's ``max_soc``.
 MAX_CORRECTIONS = 4
 #: A further correction is tried only if the last one cut the constraint violation's norm to at
 #: most this share of the one before: IPOPT's ``kappa_soc``.
 CONTRACTION = 0.99
+#: The loop's parameters that SciPy's has not (each with SciPy's behaviour at one value).
+EXTRA_PARAMETERS = ("max_corrections", "stall_iterations")
 
 # The constants of SciPy's loop, unchanged (references in SciPy's source).
 PENALTY_FACTOR = 0.3
@@ -74,9 +89,11 @@ def equality_constrained_sqp(
     trust_ub=None,
     scaling=_scipy_sqp.default_scaling,
     max_corrections: int = MAX_CORRECTIONS,
+    stall_iterations: int = STALL_ITERATIONS,
 ):
     """SciPy's ``equality_constrained_sqp`` (same arguments and result) with up to
-    ``max_corrections`` second-order corrections per refused step."""
+    ``max_corrections`` second-order corrections per refused step, and the subproblem ended on a
+    stall of ``stall_iterations`` iterations (module docstring)."""
     projections = _scipy_sqp.projections
     (n,) = np.shape(x0)
     if trust_lb is None:
@@ -114,15 +131,23 @@ def equality_constrained_sqp(
     cg_info = {"niter": 0, "stop_cond": 0, "hits_boundary": False}
 
     last_iteration_failed = False
+    subproblem = getattr(stop_criteria, "__self__", None)  # SciPy's BarrierSubproblem
     if resume is not None:
         assert session is not None  # (it gave the state)
         session.restore(resume, stop_criteria, state)
         last_iteration_failed = bool(resume.arrays["last_iteration_failed"])
         cg_info = checkpoint.cg_info(resume)
+    stall = StallTest(subproblem, stall_iterations, checkpoint.stall_window(resume) if resume is not None else ())
     while True:
         if session is not None:
-            session.note(x, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state)
+            session.note(x, trust_radius, penalty, last_iteration_failed, cg_info, stop_criteria, state, stall)
         if stop_criteria(state, x, last_iteration_failed, optimality, constr_violation, trust_radius, penalty, cg_info):
+            break
+        if stall.stalled(float(f), float(constr_violation), trust_radius):
+            if subproblem is not None and stall.ends_solve(float(constr_violation)):
+                subproblem.terminate, state.status = True, 2  # nothing left to decrease: SciPy's end by xtol
+                if session is not None:
+                    session.stalled = stall.describe()
             break
         # Normal step: minimise ||A dn + b|| within a shrunk trust region and box.
         dn = modified_dogleg(A, Y, b, TR_FACTOR * trust_radius, BOX_FACTOR * trust_lb, BOX_FACTOR * trust_ub)

@@ -19,7 +19,9 @@ unchanged:
 - the barrier function's sum of ``log(s)``, vectorised instead of a Python loop over the slacks
   (bit-identical);
 - its SQP loop, by :func:`~modular_robots.ocp._scipy.sqp.equality_constrained_sqp`: SciPy's, with
-  the second-order correction of a refused step repeated (IPOPT's rule) instead of tried once;
+  the second-order correction of a refused step repeated (IPOPT's rule) instead of tried once,
+  the normal step given more of the slacks' box, and a barrier subproblem that has stalled ended
+  (:mod:`~modular_robots.ocp._scipy.stall`);
 - the barrier subproblem's Jacobian, by puts into the structure of the last one
   (:class:`~modular_robots.ocp._scipy.barrier.BarrierJacobian`; bit-identical);
 - the quasi-Newton update's gradient change ``J^T v - J_prev^T v``, by SciPy's kernel without
@@ -107,7 +109,7 @@ _TRUST_CONSTR = "scipy.optimize._trustregion_constr"
 
 class ScipyHookWarning(UserWarning):
     """A replacement of part of SciPy's trust-constr is not installed; SciPy's own code is used
-    (slower, and for the SQP loop without repeated second-order corrections)."""
+    (slower, and for the SQP loop without the project's changes to it: :mod:`~modular_robots.ocp._scipy.sqp`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -358,8 +360,9 @@ def _prepare_sqp_loop() -> _Hook:
     from . import sqp as copy  # reads SciPy's qp_subproblem and equality_constrained_sqp modules
 
     ours = tuple(inspect.signature(copy.equality_constrained_sqp).parameters)
-    _expect_parameters(original, tuple(name for name in ours if name != "max_corrections"))
+    _expect_parameters(original, tuple(name for name in ours if name not in copy.EXTRA_PARAMETERS))
     _expect_uses(module.tr_interior_point, ("equality_constrained_sqp",))
+    _expect_uses(module.BarrierSubproblem.stop_criteria, ("tolerance", "xtol", "global_stop_criteria"))
     source = hashlib.sha256(inspect.getsource(original).encode()).hexdigest()
     if source != COPIED_LOOP_SHA256:
         raise _Mismatch("SciPy's equality_constrained_sqp is not the one sqp.py copies (SciPy 1.17's)")
