@@ -22,6 +22,7 @@ from modular_robots.exceptions import CheckpointWarning, ProblemError
 from modular_robots.feasibility import check_composition
 from modular_robots.ocp import resume as resume_module
 from modular_robots.ocp._scipy import Installed
+from modular_robots.ocp._scipy.stall import StallTest
 from modular_robots.ocp.candidate import composition_problem, make_candidate
 from modular_robots.ocp.solver import ShootingSolver, TrustConstrState, resumable
 from modular_robots.pipeline import candidate_specs
@@ -100,12 +101,26 @@ def test_a_resumed_solve_is_the_unstopped_one_to_its_optimum(tmp_path):
     _check(lambda **kw: ShootingSolver(problem, **kw), lambda n: [1, 2, 9, n - 10, n - 1, n], tmp_path)
 
 
-def test_a_crawl_to_the_iteration_limit_with_refused_steps_resumes_alike(tmp_path):
-    """Its first barrier subproblem stalls (:mod:`~modular_robots.ocp._scipy.stall`) after
-    iteration 83: stopped within the stall test's window, the resumed solve stalls where the
-    unstopped one does."""
+def test_a_crawl_to_the_iteration_limit_with_refused_steps_resumes_alike(tmp_path, monkeypatch):
+    """Its barrier subproblems stall (:mod:`~modular_robots.ocp._scipy.stall`): stopped within the
+    first stall test's window, at the iteration it fires and just after, the resumed solve stalls
+    where the unstopped one does, to the iteration limit."""
     problem = _problem("B-J1-L2-J1-L1-J1-L2-J2-L1-E2", iterations=120)
-    _check(lambda **kw: ShootingSolver(problem, **kw), [80, 119], tmp_path)
+    stalls, solver = [], ShootingSolver(problem)
+    stalled = StallTest.stalled
+
+    def spied(self, *args):
+        found = stalled(self, *args)
+        if found:
+            stalls.append(solver.last.iteration)  # the iterate whose stopping test came before
+        return found
+
+    monkeypatch.setattr(StallTest, "stalled", spied)
+    solver.solve()
+    monkeypatch.undo()
+    assert stalls and stalls[0] > 12, stalls
+    first = stalls[0]
+    _check(lambda **kw: ShootingSolver(problem, **kw), [first - 3, first, first + 1, 119], tmp_path)
 
 
 def test_a_quasi_newton_objective_and_the_structured_hessian_resume_alike(tmp_path):

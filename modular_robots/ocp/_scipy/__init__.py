@@ -6,7 +6,8 @@ structure, so these modules replace private SciPy names: the installer
 replacement (:mod:`~modular_robots.ocp._scipy.projections` (with
 :mod:`~modular_robots.ocp._scipy.banded`),
 :mod:`~modular_robots.ocp._scipy.canonical`, :mod:`~modular_robots.ocp._scipy.sqp`, a copy of
-SciPy's SQP loop under SciPy's licence, ``LICENSE-scipy.txt`` beside it,
+SciPy's SQP loop under SciPy's licence, ``LICENSE-scipy.txt`` beside it, with its stall test
+:mod:`~modular_robots.ocp._scipy.stall`,
 :mod:`~modular_robots.ocp._scipy.barrier`, :mod:`~modular_robots.ocp._scipy.boxes` and the
 sparse products of :mod:`~modular_robots.ocp._scipy.products`), and the checkpoints of a solve
 stopped at an iterate (:mod:`~modular_robots.ocp._scipy.checkpoint`, which reads and fills in

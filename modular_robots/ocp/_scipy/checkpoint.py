@@ -10,7 +10,8 @@ trust-constr carries from one iteration to the next and cannot compute again:
   the last step was refused, with the conjugate-gradient report the iteration's stopping test
   was given;
 - the barrier parameter and tolerance of the subproblem in progress, and the barrier function's
-  last values its stall test has seen (:mod:`~modular_robots.ocp._scipy.stall`);
+  and constraint violation's last values its stall test has seen
+  (:mod:`~modular_robots.ocp._scipy.stall`);
 - the result SciPy carries (counts, the last accepted point's values and multipliers);
 - each quasi-Newton (SR1) matrix, with the point, the multipliers and the point before it that
   its wrapper's next update starts from.
@@ -197,8 +198,8 @@ def cg_info(resume: TrustConstrState) -> dict[str, Any]:
 
 
 def stall_window(resume: TrustConstrState) -> np.ndarray:
-    """The barrier function's values the state's stall test had seen."""
-    return np.asarray(resume.arrays["stall.window"], dtype=float)
+    """The ``(barrier function, constraint violation)`` pairs the state's stall test had seen."""
+    return np.asarray(resume.arrays["stall.window"], dtype=float).reshape(-1, 2)
 
 
 def _wrappers(global_stop_criteria) -> tuple[Any, list[Any]]:

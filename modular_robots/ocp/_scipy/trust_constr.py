@@ -20,8 +20,7 @@ unchanged:
   (bit-identical);
 - its SQP loop, by :func:`~modular_robots.ocp._scipy.sqp.equality_constrained_sqp`: SciPy's, with
   the second-order correction of a refused step repeated (IPOPT's rule) instead of tried once,
-  the normal step given more of the slacks' box, and a barrier subproblem that has stalled ended
-  (:mod:`~modular_robots.ocp._scipy.stall`);
+  and a barrier subproblem that has stalled ended (:mod:`~modular_robots.ocp._scipy.stall`);
 - the barrier subproblem's Jacobian, by puts into the structure of the last one
   (:class:`~modular_robots.ocp._scipy.barrier.BarrierJacobian`; bit-identical);
 - the quasi-Newton update's gradient change ``J^T v - J_prev^T v``, by SciPy's kernel without
@@ -313,6 +312,15 @@ def _expect_uses(function, names: tuple[str, ...]) -> None:
         raise _Mismatch(f"{_qualified(function)} no longer uses {', '.join(missing)}")
 
 
+def _expect_closure(function, nested: str, names: tuple[str, ...]) -> None:
+    """``function`` defines a function ``nested`` whose closure holds ``names`` (the stall test
+    reads them from trust-constr's stopping test)."""
+    code = inspect.unwrap(function).__code__
+    found = [c for c in code.co_consts if inspect.iscode(c) and c.co_name == nested]
+    if not any(set(names) <= set(c.co_freevars) for c in found):
+        raise _Mismatch(f"{_qualified(function)}'s {nested} no longer takes {', '.join(names)} from its closure")
+
+
 def _qualified(function) -> str:
     return f"{getattr(function, '__module__', '?')}.{getattr(function, '__qualname__', function)}"
 
@@ -363,6 +371,10 @@ def _prepare_sqp_loop() -> _Hook:
     _expect_parameters(original, tuple(name for name in ours if name not in copy.EXTRA_PARAMETERS))
     _expect_uses(module.tr_interior_point, ("equality_constrained_sqp",))
     _expect_uses(module.BarrierSubproblem.stop_criteria, ("tolerance", "xtol", "global_stop_criteria"))
+    _expect_uses(module.BarrierSubproblem.__init__, ("barrier_parameter", "terminate"))
+    _expect_uses(module.tr_interior_point, ("terminate",))
+    minimize_module = _private(f"{_TRUST_CONSTR}.minimize_trustregion_constr")
+    _expect_closure(minimize_module._minimize_trustregion_constr, "stop_criteria", ("barrier_tol", "gtol"))
     source = hashlib.sha256(inspect.getsource(original).encode()).hexdigest()
     if source != COPIED_LOOP_SHA256:
         raise _Mismatch("SciPy's equality_constrained_sqp is not the one sqp.py copies (SciPy 1.17's)")
