@@ -39,6 +39,7 @@ from modular_robots.feasibility import check_composition
 from modular_robots.ocp import verification
 from modular_robots.ocp._scipy import trust_constr
 from modular_robots.ocp.candidate import Candidate, _crossing, composition_problem, make_candidate
+from modular_robots.ocp.hessian import torque_hessians
 from modular_robots.ocp.shooting import NonFiniteError, ShootingProblem
 from modular_robots.ocp.solver import ShootingSolver
 from modular_robots.ocp.trajectory import sample_trajectory
@@ -260,6 +261,30 @@ def test_exact_hessian_matches_differences_of_the_exact_jacobian(paper, name):
     assert np.abs(curvature[1 : 1 + problem.nv, 1 : 1 + problem.nv]).max() > 1e-3
     with pytest.raises(ValueError, match="the clearance rows have no exact Hessian"):
         problem.exact_hessian(y, np.ones(len(clearance)), clearance)
+
+
+def test_torque_hessians_equal_the_chain_rule_through_the_whole_substep_jacobians():
+    """The pull-back of RNEA's curvature, written with the sub-step Jacobians' scaled-identity
+    blocks, equals the plain ``J^T A J`` with the Jacobians ``d(q_j, v_j) / d(q0, v0, u, tf)``
+    built in full from the interval polynomials (``q_j = q0 + v0 s + u s^2 / 2``, ``s = tf f_j``)."""
+    rng = np.random.default_rng(4)
+    N, J, nv = 3, 4, 5
+    fractions, tf, u = np.arange(J) / (2.0 * J), rng.uniform(1.0, 3.0, N), rng.normal(size=(N, nv))
+    velocities = rng.normal(size=(N, J, nv))
+    curvature = tuple(rng.normal(size=(N * J, nv, nv)) for _ in range(4))
+    qq, vv, qv, qa = (c.reshape(N, J, nv, nv) for c in curvature)
+    expected = np.zeros((N, 3 * nv + 1, 3 * nv + 1))
+    eye = np.eye(nv)
+    for m in range(N):
+        for j, f in enumerate(fractions):
+            s = tf[m] * f
+            jq = np.hstack([eye, s * eye, 0.5 * s**2 * eye, (velocities[m, j] * f)[:, None]])
+            jv = np.hstack([0 * eye, eye, s * eye, (u[m] * f)[:, None]])
+            ja = np.hstack([0 * eye, 0 * eye, eye, np.zeros((nv, 1))])  # RNEA's acceleration is u
+            cross = jq.T @ qv[m, j] @ jv + jq.T @ qa[m, j] @ ja
+            expected[m] += jq.T @ qq[m, j] @ jq + jv.T @ vv[m, j] @ jv + cross + cross.T
+    got = torque_hessians(fractions, tf, u, velocities, curvature)
+    assert np.abs(got - expected).max() <= 1e-12 * np.abs(expected).max()
 
 
 def test_exact_hessian_includes_the_drives_friction():

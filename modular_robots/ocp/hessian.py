@@ -5,11 +5,11 @@ On one interval with parameters ``p = (q0, v0, u, tf)`` (``u`` the acceleration)
 states are ``q_j = q0 + v0 s_j + u s_j^2 / 2`` and ``v_j = v0 + u s_j`` with ``s_j = tf f_j``:
 polynomials whose second derivatives are written out here exactly. The torques
 ``tau_j = RNEA(q_j, v_j, u)`` add Pinocchio's curvature: the second derivatives of RNEA, which the
-PyPI ``pin`` wheel does not expose, are taken by central differences of its analytical first
-derivatives (``computeRNEADerivatives``), contracted with the multipliers first, so one difference
-per coordinate and sub-step serves every row: central in ``q`` (an error of order
-:data:`RNEA_STEP` squared), one-sided in ``v`` for ``d2 / dv2`` (``dtau/dv`` is linear in ``v``,
-so that difference is exact to rounding).
+PyPI ``pin`` wheel does not expose, are taken by differences of its analytical first
+derivatives (``computeRNEADerivatives``), contracted with the multipliers, so one difference per
+coordinate and sub-step serves every row: forward differences, in ``q`` with an error of order
+:data:`RNEA_STEP` (about 1e-7 relative), in ``v`` exact to rounding (``dtau/dv`` is linear in
+``v``).
 """
 
 from __future__ import annotations
@@ -21,8 +21,9 @@ from ..robot import RobotModel
 
 __all__ = ["RNEA_STEP", "kinematic_hessians", "rnea_curvature"]
 
-#: Central-difference step [rad | m, rad/s | m/s] for RNEA's second derivatives.
-RNEA_STEP = 1e-5
+#: Forward-difference step [rad | m, rad/s | m/s] for RNEA's second derivatives: about
+#: ``sqrt(eps)`` times the joints' range, where the truncation and the rounding errors meet.
+RNEA_STEP = 1e-7
 
 
 def kinematic_hessians(
@@ -68,34 +69,37 @@ def rnea_curvature(
 
     Returns ``(qq, vv, qv, qa, grad_q, grad_v)``: ``(K, nv, nv)`` blocks ``d2 / dq dq``,
     ``d2 / dv dv``, ``d2 / dq dv`` (rows ``q``), ``d2 / dq da`` (rows ``q``), and the first
-    derivatives ``weight . dtau/dq`` and ``weight . dtau/dv`` ``(K, nv)``.
+    derivatives ``weight . dtau/dq`` and ``weight . dtau/dv`` ``(K, nv)``. Pinocchio's first
+    derivatives are gathered at the ``2 nv + 1`` points of each ``K`` first and contracted with
+    the weights in one product: the calls are the cost, not the arithmetic.
     """
     model, data = robot.model, robot.data
     K, nv = q.shape
-    upper = np.triu(np.ones((nv, nv)))  # Pinocchio fills the mass matrix's upper triangle
-    strict = np.triu(np.ones((nv, nv)), 1)
-
-    def contracted(qk, vk, ak, w):
-        dq, dv, m = pin.computeRNEADerivatives(model, data, qk, vk, ak)
-        return w @ dq, w @ dv, w @ (m * upper) + (m * strict) @ w
-
-    qq, vv, qv, qa = (np.empty((K, nv, nv)) for _ in range(4))
-    grad_q, grad_v = np.empty((K, nv)), np.empty((K, nv))
+    shifted = 1 + np.arange(nv)  # the evaluations at q + step e_i, then at v + step e_i
+    dtau_dq, mass = np.empty((2, K, 1 + nv, nv, nv))
+    dtau_dv = np.empty((K, 1 + 2 * nv, nv, nv))
     eye = np.eye(nv) * step
     for k in range(K):
-        w = weight[k]
-        grad_q[k], grad_v[k], _ = contracted(q[k], v[k], a[k], w)
+        qk, vk, ak = q[k], v[k], a[k]
+        dtau_dq[k, 0], dtau_dv[k, 0], mass[k, 0] = pin.computeRNEADerivatives(model, data, qk, vk, ak)
         for i in range(nv):
-            plus = contracted(q[k] + eye[i], v[k], a[k], w)
-            minus = contracted(q[k] - eye[i], v[k], a[k], w)
-            qq[k, :, i] = (plus[0] - minus[0]) / (2 * step)
-            qv[k, i, :] = (plus[1] - minus[1]) / (2 * step)
-            qa[k, i, :] = (plus[2] - minus[2]) / (2 * step)
-            # dtau/dv is linear in v: a one-sided difference is exact to rounding.
-            vv[k, :, i] = (contracted(q[k], v[k] + eye[i], a[k], w)[1] - grad_v[k]) / step
+            dtau_dq[k, 1 + i], dtau_dv[k, 1 + i], mass[k, 1 + i] = pin.computeRNEADerivatives(
+                model, data, qk + eye[i], vk, ak
+            )
+            dtau_dv[k, 1 + nv + i] = pin.computeRNEADerivatives(model, data, qk, vk + eye[i], ak)[1]
+    mass = np.triu(mass) + np.swapaxes(np.triu(mass, 1), 2, 3)  # Pinocchio fills the upper triangle
+    by_q, by_v, by_a = (np.einsum("ka,knab->knb", weight, d) for d in (dtau_dq, dtau_dv, mass))
+
+    def difference(g, rows):  # row i: (g at the i-th shifted point - g at the point) / step
+        return (g[:, rows] - g[:, :1]) / step
+
+    qq = np.swapaxes(difference(by_q, shifted), 1, 2)
+    # dtau/dv is linear in v: that difference is exact to rounding.
+    vv = np.swapaxes(difference(by_v, nv + shifted), 1, 2)
+    qv, qa = difference(by_v, shifted), difference(by_a, shifted)
     qq = 0.5 * (qq + np.swapaxes(qq, 1, 2))
     vv = 0.5 * (vv + np.swapaxes(vv, 1, 2))
-    return qq, vv, qv, qa, grad_q, grad_v
+    return qq, vv, qv, qa, by_q[:, 0], by_v[:, 0]
 
 
 def torque_hessians(
@@ -113,23 +117,29 @@ def torque_hessians(
     Returns ``(N, P, P)``.
     """
     N, nv = u.shape
-    J = len(fractions)
-    P = 3 * nv + 1
     f = np.asarray(fractions, dtype=float)
     s = np.broadcast_to(np.asarray(tf, dtype=float), (N,))[:, None] * f  # (N, J)
-    eye = np.eye(nv)
-    Jq = np.zeros((N, J, nv, P))
-    Jq[:, :, :, :nv] = eye
-    Jq[:, :, :, nv : 2 * nv] = s[:, :, None, None] * eye
-    Jq[:, :, :, 2 * nv : 3 * nv] = 0.5 * (s**2)[:, :, None, None] * eye
-    Jq[:, :, :, -1] = velocities * f[None, :, None]
-    Jv = np.zeros((N, J, nv, P))
-    Jv[:, :, :, nv : 2 * nv] = eye
-    Jv[:, :, :, 2 * nv : 3 * nv] = s[:, :, None, None] * eye
-    Jv[:, :, :, -1] = u[:, None, :] * f[None, :, None]
-    qq, vv, qv, qa = (c.reshape(N, J, nv, nv) for c in curvature[:4])
-    H = np.einsum("mjap,mjab,mjbr->mpr", Jq, qq, Jq)
-    H += np.einsum("mjap,mjab,mjbr->mpr", Jv, vv, Jv)
-    cross = np.einsum("mjap,mjab,mjbr->mpr", Jq, qv, Jv)
-    cross[:, :, 2 * nv : 3 * nv] += np.einsum("mjap,mjab->mpb", Jq, qa)
+    # d q_j / d(q0, v0, u) = c_q I and d v_j / d(q0, v0, u) = c_v I, blocks scaled by (3, N, J)
+    # coefficients; d / dtf are the vectors t_q, t_v (N, J, nv).
+    c_q = np.stack([np.ones_like(s), s, 0.5 * s**2])
+    c_v = np.stack([np.zeros_like(s), np.ones_like(s), s])
+    t_q = velocities * f[None, :, None]
+    t_v = u[:, None, :] * f[None, :, None]
+    qq, vv, qv, qa = (c.reshape(N, len(f), nv, nv) for c in curvature[:4])
+    H = _pulled_back(c_q, t_q, qq, c_q, t_q) + _pulled_back(c_v, t_v, vv, c_v, t_v)
+    cross = _pulled_back(c_q, t_q, qv, c_v, t_v)
+    cross[:, :-1, 2 * nv : 3 * nv] += np.einsum("amj,mjkl->makl", c_q, qa).reshape(N, 3 * nv, nv)
+    cross[:, -1, 2 * nv : 3 * nv] += np.einsum("mjk,mjkl->ml", t_q, qa)
     return H + cross + np.swapaxes(cross, 1, 2)
+
+
+def _pulled_back(c_x, t_x, A, c_y, t_y) -> np.ndarray:
+    """``sum_j J_x[j]^T A[j] J_y[j]`` ``(N, P, P)`` for the sub-step Jacobians
+    ``J[j] = [c[0, j] I, c[1, j] I, c[2, j] I, t[j]]`` of :func:`torque_hessians`."""
+    N, _, nv, _ = A.shape
+    H = np.empty((N, 3 * nv + 1, 3 * nv + 1))
+    H[:, :-1, :-1] = np.einsum("amj,bmj,mjkl->makbl", c_x, c_y, A).reshape(N, 3 * nv, 3 * nv)
+    H[:, :-1, -1] = np.einsum("amj,mjkl,mjl->mak", c_x, A, t_y).reshape(N, 3 * nv)
+    H[:, -1, :-1] = np.einsum("mjk,mjkl,bmj->mbl", t_x, A, c_y).reshape(N, 3 * nv)
+    H[:, -1, -1] = np.einsum("mjk,mjkl,mjl->m", t_x, A, t_y)
+    return H
