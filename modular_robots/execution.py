@@ -629,6 +629,11 @@ class Executor(Protocol):
         whose worker died)."""
         ...
 
+    def checkpoints(self, names: Sequence[str]) -> dict[str, Any]:
+        """Where each named job stands, leaving it to go on: its ``checkpoint()`` (None for a
+        job that has none, never started, or whose worker died or did not answer)."""
+        ...
+
     def shutdown(self) -> None: ...
 
 
@@ -668,6 +673,13 @@ class InProcessExecutor:
             out[name] = job.result if job is not None else None
         return out
 
+    def checkpoints(self, names):
+        out = {}
+        for name in names:
+            job = self._jobs.get(name)
+            out[name] = job.checkpoint() if job is not None else None
+        return out
+
     def shutdown(self) -> None:
         for job in self._jobs.values():
             if job.result is None:
@@ -682,10 +694,10 @@ def _worker(parent, conn, factory, context, specs, names) -> None:
     try:
         while True:
             command, names, number = conn.recv()
-            if command not in ("advance", "stop"):
+            if command not in ("advance", "stop", "checkpoints"):
                 break
             try:
-                reply = executor.advance(names) if command == "advance" else executor.stop(names)
+                reply = getattr(executor, command)(names)
                 conn.send((number, reply))
             except (OSError, EOFError):  # the parent has gone
                 raise
@@ -805,6 +817,9 @@ class ProcessExecutor:
 
     def stop(self, names):
         return self._command("stop", names, tolerate_dead=True)
+
+    def checkpoints(self, names):
+        return self._command("checkpoints", names, tolerate_dead=True)
 
     def shutdown(self) -> None:
         for conn in self._conns:

@@ -376,6 +376,9 @@ class _Host:
     def stop(self) -> Any:
         return self._executor.stop([self._name])[self._name]
 
+    def checkpoint(self) -> Any:
+        return self._executor.checkpoints([self._name])[self._name]
+
 
 @functools.cache
 def _remote():
@@ -531,6 +534,14 @@ class RayExecutor:
         finally:
             for name in names:
                 self._release(name)
+        return out
+
+    def checkpoints(self, names):
+        calls = {name: self._actors[name].checkpoint.remote() for name in names if name in self._actors}
+        out: dict[str, Any] = dict.fromkeys(names)
+        for name, call in calls.items():
+            with contextlib.suppress(ray.exceptions.RayActorError, ray.exceptions.GetTimeoutError):
+                out[name] = _get(call, timeout=STOP_SECONDS)
         return out
 
     def shutdown(self) -> None:

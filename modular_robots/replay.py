@@ -69,6 +69,13 @@ class ReplayingExecutor:
         out.update((name, self._recorded[name][1]) for name in names if name in self._recorded)
         return out
 
+    def checkpoints(self, names: Sequence[str]) -> dict[str, Any]:
+        live = [name for name in names if name not in self._recorded]
+        out = dict.fromkeys(names)
+        if live and self._inner is not None:
+            out.update(self._inner.checkpoints(live))
+        return out
+
     def shutdown(self) -> None:
         if self._inner is not None:
             self._inner.shutdown()

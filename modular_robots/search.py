@@ -41,7 +41,7 @@ import json
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO
@@ -64,7 +64,7 @@ from .feasibility import (
 from .folder import naming_the_file
 from .frontier import bound_chunks, take_pass
 from .ocp.candidate import CandidateSpec, make_candidate
-from .ocp.resume import CheckpointFolder
+from .ocp.resume import CandidateCheckpoint, CheckpointFolder
 from .ocp.solver import Iterate
 from .pipeline import RunResult, _labelled, candidate_specs, cost_bound, ranked, record_final_winner
 from .plan.boundary import BoundaryPair
@@ -87,6 +87,9 @@ SEARCHES = ("all", "best-first")
 STATE = "search.jsonl"
 #: The folder (in the results folder) of the checkpoints of candidates a stop interrupted.
 CHECKPOINTS = "search-checkpoints"
+#: While step C runs, the running candidates' checkpoints are written this often [s]: a kill -9
+#: or a crash then loses at most this much of their work (a stop writes them as it ends).
+CHECKPOINT_SECONDS = 60.0
 #: The ``search`` version of its first line.
 FORMAT = 1
 #: Configurations step B keeps as one when within this distance (max norm) [rad | m]
@@ -423,6 +426,7 @@ class _Search:
                         self._better(result)
 
             cut = False
+            saved = time.perf_counter()
             try:
                 for progress in rounds:
                     self.rounds += 1
@@ -432,6 +436,10 @@ class _Search:
                     if progress.alive and time.perf_counter() >= deadline:
                         cut = True
                         break
+                    if progress.alive and time.perf_counter() - saved >= CHECKPOINT_SECONDS:
+                        running = [name for name in names if name not in manager.results]
+                        self.log.write_running(executor.checkpoints(running).values())
+                        saved = time.perf_counter()
             except BaseException:  # the candidates it stopped: their checkpoints, and result.json (not the record)
                 rounds.close()
                 for name in names:
@@ -773,6 +781,14 @@ class _Log:
         candidate stopped before its first iterate, or by a solver without one: none)."""
         if self.checkpoints is not None and result.status == CandidateStatus.STOPPED and result.checkpoint is not None:
             self.checkpoints.save(result.checkpoint)
+
+    def write_running(self, checkpoints: Iterable[CandidateCheckpoint | None]) -> None:
+        """Keep running candidates' checkpoints (None: a candidate without one), for a run that
+        goes on after a crash."""
+        if self.checkpoints is not None:
+            for checkpoint in checkpoints:
+                if checkpoint is not None:
+                    self.checkpoints.save(checkpoint)
 
     def write_cut(self, name: str, iterations: int) -> None:
         """Record that a budget stopped candidate ``name`` after ``iterations`` of its own."""

@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -25,7 +26,9 @@ from modular_robots import ray_engine
 from modular_robots.cli import main
 from modular_robots.exceptions import EngineError, Terminated
 from modular_robots.execution import ExecutionSettings, make_engine, make_executor, terminations_raise
-from modular_robots.pipeline import run_scenario, with_execution
+from modular_robots.feasibility import filter_compositions
+from modular_robots.ocp.candidate import make_candidate
+from modular_robots.pipeline import candidate_specs, run_scenario, with_execution
 from modular_robots.scenario import load_scenario
 from modular_robots.search import search_scenario
 
@@ -197,6 +200,30 @@ def test_the_search_gives_the_same_answer_on_ray(cluster, tmp_path):
     assert [(c.name, c.status, c.cost_history) for c in on_ray.candidates] == [
         (c.name, c.status, c.cost_history) for c in here.candidates
     ]
+    assert _no_actors_left()
+
+
+def test_running_candidates_send_their_checkpoints_from_their_actors_and_go_on(cluster):
+    """``checkpoints`` on Ray: each actor sends where its candidate stands, as one process does
+    with the same candidates, and both then go on to the same iterates."""
+    scenario = load_scenario(SMALL.with_name("small-fast.yaml"))
+    survivors = [verdict for verdict in filter_compositions(scenario) if verdict.passed]
+    specs = list(candidate_specs(survivors))[:2]
+    names = [spec.name for spec in specs]
+    on_ray = make_executor(make_candidate, scenario, specs, names, 2, RAY)
+    here = make_executor(make_candidate, scenario, specs, names, 1)
+    try:
+        for _ in range(3):
+            on_ray.advance(names), here.advance(names)
+        sent, taken = on_ray.checkpoints(names), here.checkpoints(names)
+        for name in names:
+            assert sent[name].iteration == taken[name].iteration == 3
+            assert np.array_equal(sent[name].state.x, taken[name].state.x)
+        went_on, here_went_on = on_ray.advance(names), here.advance(names)
+        for name in names:
+            assert np.array_equal(went_on[name][1].y, here_went_on[name][1].y)
+    finally:
+        on_ray.shutdown(), here.shutdown()
     assert _no_actors_left()
 
 

@@ -16,6 +16,9 @@ import json
 import math
 import random
 import shutil
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -140,6 +143,28 @@ def test_a_candidate_stopped_mid_solve_goes_on_from_its_checkpoint(scenario, uni
     stopped (the first iteration it solves is the one after its checkpoint's), the search ends as
     the uninterrupted one, and the checkpoints of the candidates that ended are removed."""
     expected, _, calls = uninterrupted
+    resumed = _resumes(monkeypatch)
+    for moment in range(calls // 3, calls):
+        out = tmp_path / f"at-{moment}"
+        with pytest.raises(_Stop):
+            search_scenario(scenario, out, jobs=1, on_progress=_stop_at(moment))
+        files = sorted((out / CHECKPOINTS).glob("*.npz"))
+        if files:
+            break
+    checkpoints = {c.name: c for c in map(resume_module.load, files)}
+    assert checkpoints and all(c.iteration > 0 for c in checkpoints.values())
+    again = search_scenario(scenario, out, jobs=1)
+    assert _answers(again) == _answers(expected)
+    for name, checkpoint in checkpoints.items():
+        composition = name.split("+")[0]
+        taken, first = resumed[composition]
+        assert taken == checkpoint.state.iteration and first == taken + 1, name
+    assert not list((out / CHECKPOINTS).glob("*.npz"))
+
+
+def _resumes(monkeypatch) -> dict[str, tuple[int, int]]:
+    """Spy on the solvers made from a checkpoint: composition name -> (the checkpoint's iteration,
+    the first iteration the resumed solver solves)."""
     resumed: dict[str, tuple[int, int]] = {}
     real = candidate_module.make_solver
 
@@ -158,20 +183,52 @@ def test_a_candidate_stopped_mid_solve_goes_on_from_its_checkpoint(scenario, uni
         return solver
 
     monkeypatch.setattr(candidate_module, "make_solver", make_solver)
-    for moment in range(calls // 3, calls):
-        out = tmp_path / f"at-{moment}"
-        with pytest.raises(_Stop):
-            search_scenario(scenario, out, jobs=1, on_progress=_stop_at(moment))
-        files = sorted((out / CHECKPOINTS).glob("*.npz"))
-        if files:
-            break
-    checkpoints = {c.name: c for c in map(resume_module.load, files)}
-    assert checkpoints and all(c.iteration > 0 for c in checkpoints.values())
-    again = search_scenario(scenario, out, jobs=1)
+    return resumed
+
+
+_KILLED_AT_ROUND = """
+import os, signal, sys
+import modular_robots.search as search
+from modular_robots import load_scenario
+
+search.CHECKPOINT_SECONDS = 0.0  # after every lockstep round
+
+
+def on_progress(stage, figures):
+    running = figures["running"]
+    if running["candidates"] and running["round"] >= int(sys.argv[3]):
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+search.search_scenario(load_scenario(sys.argv[1]), sys.argv[2], jobs=int(sys.argv[4]), on_progress=on_progress)
+"""
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_search_killed_in_step_c_goes_on_from_the_checkpoints_it_wrote_while_running(
+    scenario, uninterrupted, tmp_path, monkeypatch, jobs
+):
+    """kill -9 in the middle of a batch's lockstep: nothing is written as it ends, but the running
+    candidates' checkpoints written every ``CHECKPOINT_SECONDS`` (here every round) are there; run
+    again, those candidates go on from them (their first solved iteration the one after), and the
+    search ends as the uninterrupted one."""
+    expected, _, _ = uninterrupted
+    out = tmp_path / "out"
+    script = tmp_path / "killed.py"
+    script.write_text(_KILLED_AT_ROUND)
+    done = subprocess.run(
+        [sys.executable, str(script), str(FAST), str(out), "4", str(jobs)], capture_output=True, timeout=600
+    )
+    assert done.returncode == -signal.SIGKILL, done.stderr.decode()[-2000:]
+    assert json.loads((out / "result.json").read_text())["status"] == "running"  # nothing recorded the end
+    checkpoints = {c.name: c for c in map(resume_module.load, sorted((out / CHECKPOINTS).glob("*.npz")))}
+    assert checkpoints and all(c.iteration >= 3 for c in checkpoints.values())
+    assert not set(checkpoints) & _recorded(out)  # the candidates that had ended left none
+    resumed = _resumes(monkeypatch)
+    again = search_scenario(scenario, out, jobs=1)  # (the worker processes' checkpoints resume here)
     assert _answers(again) == _answers(expected)
     for name, checkpoint in checkpoints.items():
-        composition = name.split("+")[0]
-        taken, first = resumed[composition]
+        taken, first = resumed[name.split("+")[0]]
         assert taken == checkpoint.state.iteration and first == taken + 1, name
     assert not list((out / CHECKPOINTS).glob("*.npz"))
 
