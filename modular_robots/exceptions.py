@@ -42,8 +42,8 @@ class InputWarning(UserWarning):
 
 
 class CheckpointWarning(UserWarning):
-    """A stopped candidate's checkpoint could not be written or read: the candidate starts from its
-    beginning in the run that goes on (slower, the same result)."""
+    """A candidate's checkpoint could not be taken, written or read: the candidate starts from an
+    older one or its beginning in the run that goes on (slower, the same result)."""
 
 
 class CatalogError(InputError):

@@ -539,9 +539,10 @@ class RayExecutor:
     def checkpoints(self, names):
         calls = {name: self._actors[name].checkpoint.remote() for name in names if name in self._actors}
         out: dict[str, Any] = dict.fromkeys(names)
+        deadline = time.monotonic() + STOP_SECONDS  # one wait for them all
         for name, call in calls.items():
             with contextlib.suppress(ray.exceptions.RayActorError, ray.exceptions.GetTimeoutError):
-                out[name] = _get(call, timeout=STOP_SECONDS)
+                out[name] = _get(call, timeout=max(0.0, deadline - time.monotonic()))
         return out
 
     def shutdown(self) -> None:

@@ -41,6 +41,7 @@ import json
 import logging
 import math
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -52,7 +53,7 @@ from .bounds import DESIGN, IK_TRAVEL, JOINT_TRAVEL, TOOL_SPEED, joint_levers, o
 from .certificate import Certificate, Ledger
 from .composition import Composition
 from .costs import design_of
-from .exceptions import InfeasibleError, InputError, shorten
+from .exceptions import CheckpointWarning, InfeasibleError, InputError, shorten
 from .execution import Engine, make_engine, make_executor, single_threaded_blas
 from .feasibility import (
     FeasibilitySettings,
@@ -85,7 +86,8 @@ logger = logging.getLogger(__name__)
 SEARCHES = ("all", "best-first")
 #: The search's record in the results folder.
 STATE = "search.jsonl"
-#: The folder (in the results folder) of the checkpoints of candidates a stop interrupted.
+#: The folder (in the results folder) of the checkpoints of candidates a stop interrupted or that
+#: were running (:data:`CHECKPOINT_SECONDS`).
 CHECKPOINTS = "search-checkpoints"
 #: While step C runs, the running candidates' checkpoints are written this often [s]: a kill -9
 #: or a crash then loses at most this much of their work (a stop writes them as it ends).
@@ -437,8 +439,7 @@ class _Search:
                         cut = True
                         break
                     if progress.alive and time.perf_counter() - saved >= CHECKPOINT_SECONDS:
-                        running = [name for name in names if name not in manager.results]
-                        self.log.write_running(executor.checkpoints(running).values())
+                        self._keep_running(executor, [name for name in names if name not in manager.results])
                         saved = time.perf_counter()
             except BaseException:  # the candidates it stopped: their checkpoints, and result.json (not the record)
                 rounds.close()
@@ -468,6 +469,21 @@ class _Search:
             self.results[name] = result
             self.ledger.candidate(result, bounds[name])
             self._better(result)
+
+    def _keep_running(self, executor, running: list[str]) -> None:
+        """Write the running candidates' checkpoints, for a run that goes on after a crash: best
+        effort, as a stop's (a candidate whose checkpoint cannot be taken goes on from an older
+        one or its start; a warning says why)."""
+        if self.log.checkpoints is None:
+            return
+        try:
+            checkpoints = executor.checkpoints(running)
+        except Exception as exc:  # (a worker's error in taking one, raised here)
+            warnings.warn(
+                f"the running candidates' checkpoints were not taken ({exc})", CheckpointWarning, stacklevel=2
+            )
+            return
+        self.log.write_running(checkpoints.values())
 
     def _better(self, result: CandidateResult) -> None:
         """Make ``result`` the best so far if it is verified and below it (ties by name). A batch's
@@ -773,7 +789,7 @@ class _Log:
         self._write({"stage": stage, "verdict": {**verdict.to_json(), "seconds": verdict.seconds}})
 
     def checkpoint(self, name: str):
-        """Candidate ``name``'s checkpoint, if a stop left one."""
+        """Candidate ``name``'s checkpoint, if a stop or a running search left one."""
         return self.checkpoints.load(name) if self.checkpoints is not None else None
 
     def write_checkpoint(self, result: CandidateResult) -> None:

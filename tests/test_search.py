@@ -156,16 +156,15 @@ def test_a_candidate_stopped_mid_solve_goes_on_from_its_checkpoint(scenario, uni
     again = search_scenario(scenario, out, jobs=1)
     assert _answers(again) == _answers(expected)
     for name, checkpoint in checkpoints.items():
-        composition = name.split("+")[0]
-        taken, first = resumed[composition]
-        assert taken == checkpoint.state.iteration and first == taken + 1, name
+        taken = checkpoint.state.iteration
+        assert (name.split("+")[0], taken, taken + 1) in resumed, name
     assert not list((out / CHECKPOINTS).glob("*.npz"))
 
 
-def _resumes(monkeypatch) -> dict[str, tuple[int, int]]:
-    """Spy on the solvers made from a checkpoint: composition name -> (the checkpoint's iteration,
-    the first iteration the resumed solver solves)."""
-    resumed: dict[str, tuple[int, int]] = {}
+def _resumes(monkeypatch) -> set[tuple[str, int, int]]:
+    """Spy on the solvers made from a checkpoint: (composition name, the checkpoint's iteration,
+    the first iteration the resumed solver solves) of each."""
+    resumed: set[tuple[str, int, int]] = set()
     real = candidate_module.make_solver
 
     def make_solver(*args, resume=None, **kwargs):
@@ -175,8 +174,11 @@ def _resumes(monkeypatch) -> dict[str, tuple[int, int]]:
         inner = solver.iterate
 
         def iterate():
+            first = None
             for it in inner():
-                resumed.setdefault(args[1].robot.name, (resume.iteration, it.iteration - kwargs["iteration_offset"]))
+                if first is None:
+                    first = it.iteration - kwargs["iteration_offset"]
+                    resumed.add((args[1].robot.name, resume.iteration, first))
                 yield it
 
         solver.iterate = iterate
@@ -204,11 +206,12 @@ search.search_scenario(load_scenario(sys.argv[1]), sys.argv[2], jobs=int(sys.arg
 """
 
 
-@pytest.mark.parametrize("jobs", [1, 2])
+@pytest.mark.parametrize(("jobs", "round_"), [(1, 4), (2, 9)])
 def test_a_search_killed_in_step_c_goes_on_from_the_checkpoints_it_wrote_while_running(
-    scenario, uninterrupted, tmp_path, monkeypatch, jobs
+    scenario, uninterrupted, tmp_path, monkeypatch, jobs, round_
 ):
-    """kill -9 in the middle of a batch's lockstep: nothing is written as it ends, but the running
+    """kill -9 in the middle of a batch's lockstep (at round 4 in one process; at round 9, after a
+    candidate has ended, on two workers): nothing is written as it ends, but the running
     candidates' checkpoints written every ``CHECKPOINT_SECONDS`` (here every round) are there; run
     again, those candidates go on from them (their first solved iteration the one after), and the
     search ends as the uninterrupted one."""
@@ -217,19 +220,21 @@ def test_a_search_killed_in_step_c_goes_on_from_the_checkpoints_it_wrote_while_r
     script = tmp_path / "killed.py"
     script.write_text(_KILLED_AT_ROUND)
     done = subprocess.run(
-        [sys.executable, str(script), str(FAST), str(out), "4", str(jobs)], capture_output=True, timeout=600
+        [sys.executable, str(script), str(FAST), str(out), str(round_), str(jobs)], capture_output=True, timeout=600
     )
     assert done.returncode == -signal.SIGKILL, done.stderr.decode()[-2000:]
     assert json.loads((out / "result.json").read_text())["status"] == "running"  # nothing recorded the end
     checkpoints = {c.name: c for c in map(resume_module.load, sorted((out / CHECKPOINTS).glob("*.npz")))}
     assert checkpoints and all(c.iteration >= 3 for c in checkpoints.values())
-    assert not set(checkpoints) & _recorded(out)  # the candidates that had ended left none
+    ended = _recorded(out)
+    assert not set(checkpoints) & ended  # the candidates that had ended left none
+    assert bool(ended) == (round_ == 9)  # (by round 9 one had: its trace replays beside the checkpoints)
     resumed = _resumes(monkeypatch)
     again = search_scenario(scenario, out, jobs=1)  # (the worker processes' checkpoints resume here)
     assert _answers(again) == _answers(expected)
     for name, checkpoint in checkpoints.items():
-        taken, first = resumed[name.split("+")[0]]
-        assert taken == checkpoint.state.iteration and first == taken + 1, name
+        taken = checkpoint.state.iteration
+        assert (name.split("+")[0], taken, taken + 1) in resumed, name
     assert not list((out / CHECKPOINTS).glob("*.npz"))
 
 

@@ -8,8 +8,8 @@ polynomials whose second derivatives are written out here exactly. The torques
 PyPI ``pin`` wheel does not expose, are taken by differences of its analytical first
 derivatives (``computeRNEADerivatives``), contracted with the multipliers, so one difference per
 coordinate and sub-step serves every row: forward differences, in ``q`` with an error of order
-:data:`RNEA_STEP` (about 1e-7 relative), in ``v`` exact to rounding (``dtau/dv`` is linear in
-``v``).
+:data:`RNEA_STEP` (about 1e-7 relative), in ``v`` over a unit step, exact to rounding (``dtau/dv``
+is linear in ``v``).
 """
 
 from __future__ import annotations
@@ -75,10 +75,12 @@ def rnea_curvature(
     """
     model, data = robot.model, robot.data
     K, nv = q.shape
-    shifted = 1 + np.arange(nv)  # the evaluations at q + step e_i, then at v + step e_i
+    shifted = 1 + np.arange(nv)  # the evaluations at q + step e_i, then at v + e_i
     dtau_dq, mass = np.empty((2, K, 1 + nv, nv, nv))
     dtau_dv = np.empty((K, 1 + 2 * nv, nv, nv))
     eye = np.eye(nv) * step
+    # dtau/dv is linear in v: a difference over a unit step in v is exact, with the least rounding.
+    unit = np.eye(nv)
     for k in range(K):
         qk, vk, ak = q[k], v[k], a[k]
         dtau_dq[k, 0], dtau_dv[k, 0], mass[k, 0] = pin.computeRNEADerivatives(model, data, qk, vk, ak)
@@ -86,16 +88,15 @@ def rnea_curvature(
             dtau_dq[k, 1 + i], dtau_dv[k, 1 + i], mass[k, 1 + i] = pin.computeRNEADerivatives(
                 model, data, qk + eye[i], vk, ak
             )
-            dtau_dv[k, 1 + nv + i] = pin.computeRNEADerivatives(model, data, qk, vk + eye[i], ak)[1]
-    mass = np.triu(mass) + np.swapaxes(np.triu(mass, 1), 2, 3)  # Pinocchio fills the upper triangle
+            dtau_dv[k, 1 + nv + i] = pin.computeRNEADerivatives(model, data, qk, vk + unit[i], ak)[1]
+    mass = np.triu(mass) + np.swapaxes(np.triu(mass, 1), 2, 3)  # Pinocchio may fill only the upper triangle
     by_q, by_v, by_a = (np.einsum("ka,knab->knb", weight, d) for d in (dtau_dq, dtau_dv, mass))
 
-    def difference(g, rows):  # row i: (g at the i-th shifted point - g at the point) / step
-        return (g[:, rows] - g[:, :1]) / step
+    def difference(g, rows, h=step):  # row i: (g at the i-th shifted point - g at the point) / h
+        return (g[:, rows] - g[:, :1]) / h
 
     qq = np.swapaxes(difference(by_q, shifted), 1, 2)
-    # dtau/dv is linear in v: that difference is exact to rounding.
-    vv = np.swapaxes(difference(by_v, nv + shifted), 1, 2)
+    vv = np.swapaxes(difference(by_v, nv + shifted, 1.0), 1, 2)
     qv, qa = difference(by_v, shifted), difference(by_a, shifted)
     qq = 0.5 * (qq + np.swapaxes(qq, 1, 2))
     vv = 0.5 * (vv + np.swapaxes(vv, 1, 2))

@@ -190,7 +190,7 @@ def load(path: Path) -> CandidateCheckpoint:
 
 
 class CheckpointFolder:
-    """The checkpoints of one search's stopped candidates, a file each in ``folder``, named by the
+    """The checkpoints of one search's stopped or running candidates, a file each in ``folder``, named by the
     search's ``fingerprint`` (a checkpoint of another search is never read) and the candidate.
 
     A checkpoint that cannot be written or read is not an error: the candidate then starts from
@@ -231,16 +231,18 @@ class CheckpointFolder:
             save(checkpoint, self.path(checkpoint.name))
         except OSError as exc:
             warnings.warn(
-                f"{checkpoint.name} will start from its beginning in a run that goes on: its checkpoint cannot be "
-                f"written ({exc})",
+                f"{checkpoint.name} will start from an older checkpoint or its beginning in a run that goes on: its "
+                f"checkpoint cannot be written ({exc})",
                 CheckpointWarning,
                 stacklevel=2,
             )
 
     def discard(self, name: str) -> None:
-        """Remove candidate ``name``'s checkpoint (it ended)."""
+        """Remove candidate ``name``'s checkpoint (it ended), and a partial one a kill left."""
+        path = self.path(name)
         with contextlib.suppress(OSError):
-            self.path(name).unlink(missing_ok=True)
+            path.unlink(missing_ok=True)
+            path.with_name(path.name + ".partial").unlink(missing_ok=True)
 
     def clear(self) -> None:
         """Remove every checkpoint of the folder (a search starts afresh there)."""
