@@ -190,11 +190,12 @@ def load(path: Path) -> CandidateCheckpoint:
 
 
 class CheckpointFolder:
-    """The checkpoints of one search's stopped or running candidates, a file each in ``folder``, named by the
-    search's ``fingerprint`` (a checkpoint of another search is never read) and the candidate.
+    """The checkpoints of one search's stopped or running candidates, a file each in ``folder``,
+    named by the search's ``fingerprint`` (a checkpoint of another search is never read) and the
+    candidate.
 
-    A checkpoint that cannot be written or read is not an error: the candidate then starts from
-    its beginning, as it did before checkpoints (a warning says why)."""
+    A checkpoint that cannot be written or read is not an error: the candidate then goes on from
+    the last one written, or starts from its beginning (a warning says why)."""
 
     def __init__(self, folder: Path, fingerprint: str):
         self.folder = Path(folder)

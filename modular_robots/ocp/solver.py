@@ -69,7 +69,7 @@ WARM_BARRIER = 1e-4
 #: The constraints' Hessian (:class:`ShootingSolver`'s ``hessian``): ``sr1``, one SR1 estimate
 #: for all rows; ``structured``, the exact second derivatives of every row but the clearance ones
 #: (:meth:`ShootingProblem.exact_hessian`) and SR1 for those. ``sr1`` is the default: over whole
-#: scenarios ``structured`` takes 7 % fewer iterations on one and 3 % more on another, loses a
+#: scenarios ``structured`` takes 8 % fewer iterations on one and 3 % more on another, loses a
 #: composition there, and costs about 40 % more per iteration (``docs/design-notes.md``).
 HESSIANS = ("sr1", "structured")
 
