@@ -4,7 +4,8 @@ trust-constr has no options for the parts the project computes from a shooting p
 structure, so these modules replace private SciPy names: the installer
 (:mod:`~modular_robots.ocp._scipy.trust_constr`, :func:`install`) and one module per
 replacement (:mod:`~modular_robots.ocp._scipy.projections` (with
-:mod:`~modular_robots.ocp._scipy.banded`),
+:mod:`~modular_robots.ocp._scipy.banded` and
+:mod:`~modular_robots.ocp._scipy.signed_rows`),
 :mod:`~modular_robots.ocp._scipy.canonical`, :mod:`~modular_robots.ocp._scipy.sqp`, a copy of
 SciPy's SQP loop under SciPy's licence, ``LICENSE-scipy.txt`` beside it, with its stall test
 :mod:`~modular_robots.ocp._scipy.stall`,
