@@ -48,6 +48,7 @@ import yaml
 
 from ._yamlio import MAX_FILE_BYTES
 from .exceptions import ScenarioError, shorten
+from .folder import atomic_path
 from .urdf_assembly import rpy_from_matrix
 
 __all__ = ["CobraImport", "import_cobra", "COBRA_COSTS", "COBRA_DEFAULT_WEIGHTS", "cobra_cost", "cobra_terms"]
@@ -86,7 +87,9 @@ class CobraImport:
         """Write the scenario to ``path`` and its meshes beside it, and return ``check(path)``
         (e.g. :func:`~modular_robots.scenario.load_scenario`). If writing or ``check`` raises,
         what was written is taken back (a file it replaced gets its old content, a folder it made
-        goes) before the error goes on: a refused import leaves the folder as it was."""
+        goes) before the error goes on: a refused import leaves the folder as it was. Each file is
+        written beside its place and renamed onto it, so a process killed meanwhile leaves every
+        file whole, the earlier import's or this one's."""
         path = Path(path)
         before: dict[Path, bytes | None] = {}
         made: set[Path] = set()
@@ -97,7 +100,8 @@ class CobraImport:
 
         def put(target: Path, write: Callable[[Path], object]) -> None:
             before.setdefault(target, target.read_bytes() if target.is_file() else None)
-            write(target)
+            with atomic_path(target) as written:
+                write(written)
 
         try:
             folder(path.parent)
@@ -110,7 +114,11 @@ class CobraImport:
         except BaseException:
             for target, old in before.items():
                 with contextlib.suppress(OSError):
-                    target.unlink(missing_ok=True) if old is None else target.write_bytes(old)
+                    if old is None:
+                        target.unlink(missing_ok=True)
+                    else:
+                        with atomic_path(target) as written:
+                            written.write_bytes(old)
             for made_folder in sorted(made, key=lambda p: len(p.parts), reverse=True):
                 with contextlib.suppress(OSError):
                     made_folder.rmdir()

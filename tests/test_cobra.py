@@ -18,7 +18,9 @@ from __future__ import annotations
 import io
 import json
 import re
+import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -478,3 +480,40 @@ def test_a_refused_import_leaves_the_folder_as_it_was(tmp_path):
     assert energy.exit_code == 1 and "--max-time SECONDS" in energy.output, energy.output
     assert energy.output.startswith("Error: cost mechEnergy,mass: the mechanical energy without the cycle time")
     assert not (tmp_path / "new").exists()
+
+
+def test_an_import_over_an_earlier_one_replaces_each_file_whole(tmp_path, monkeypatch):
+    """Each file is written beside its place and renamed onto it: while any file of the new import
+    is written, every file of the earlier one is still whole where it was (a kill -9 then leaves
+    each file old or new, never cut short), and the import ends as a fresh one."""
+    task = TASKS / "PTP_pause.json"
+    out = tmp_path / "cell" / "pause.yaml"
+    import_cobra(task, IMPROV_6DOF, out, payload=1.0).write(out)
+    earlier = {p: p.read_bytes() for p in out.parent.rglob("*") if p.is_file()}
+    assert any(p.suffix == ".stl" for p in earlier)
+    written = []
+
+    def writing(target) -> None:
+        written.append(Path(target))
+        assert {p: p.read_bytes() for p in earlier} == earlier
+
+    copyfile, write_text = shutil.copyfile, Path.write_text
+
+    def copy_spy(source, target, *args, **kwargs):
+        writing(target)
+        return copyfile(source, target, *args, **kwargs)
+
+    def write_spy(path, *args, **kwargs):
+        writing(path)
+        return write_text(path, *args, **kwargs)
+
+    monkeypatch.setattr(shutil, "copyfile", copy_spy)
+    monkeypatch.setattr(Path, "write_text", write_spy)
+    import_cobra(task, IMPROV_6DOF, out).write(out)
+    monkeypatch.undo()
+    assert len(written) == len(earlier) and not set(written) & set(earlier)
+    fresh = tmp_path / "fresh" / "pause.yaml"
+    import_cobra(task, IMPROV_6DOF, fresh).write(fresh)
+    now = {p.relative_to(out.parent): p.read_bytes() for p in out.parent.rglob("*") if p.is_file()}
+    assert now == {p.relative_to(fresh.parent): p.read_bytes() for p in fresh.parent.rglob("*") if p.is_file()}
+    assert now[Path("pause.yaml")] != earlier[out]  # the payload is gone: the scenario was replaced
