@@ -51,8 +51,8 @@ def test_rows_with_the_same_columns_pair_only_with_their_own_negative():
     rows = signed_rows(J)
     assert rows.source.tolist() == [0, 1, 2, 1, 2, 3, 0]  # later copies pair with the latest kept row
     assert rows.sign.tolist() == [1, 1, 1, -1, -1, 1, -1]
-    x = np.array([0.3, -1.1, 2.0, 0.7])
-    assert rows.expand(rows.kept(J.data) @ x).tobytes() == (J @ x).tobytes()
+    for x in (np.array([0.3, -1.1, 2.0, 0.7]), np.zeros(4)):  # the zeros: +0.0 on every row, as SciPy's
+        assert rows.expand(rows.kept(J.data) @ x).tobytes() == (J @ x).tobytes()
 
 
 def test_rows_that_stop_being_copies_are_found_again():
@@ -69,6 +69,22 @@ def test_rows_that_stop_being_copies_are_found_again():
     assert again is not first and again.n_kept == first.n_kept + 1
     assert_same_projections(changed, ny)
     assert_same_projections(A, ny)  # rows found for the changed values serve the first ones too
+
+
+def test_a_kept_row_that_changes_ends_its_pair():
+    """The check compares each copy with its kept row as it is now: the same values reuse the pairs
+    found, a kept row changed (not its copy) has them found again."""
+    A, ny = paper_barrier_jacobian()
+    projections_module._last_layout.layout = None
+    first = BarrierKKT(A, ny)._rows
+    assert BarrierKKT(A.copy(), ny)._rows is first
+    me = A.shape[0] - (A.shape[1] - ny)
+    copy = int(np.flatnonzero(first.sign < 0)[0])
+    kept = me + int(np.flatnonzero((first.source == first.source[copy]) & (first.sign > 0))[0])
+    changed = A.copy()
+    changed.data[changed.indptr[kept]] *= 1.5
+    assert BarrierKKT(changed, ny)._rows is not first
+    assert_same_projections(changed, ny)
 
 
 def test_a_matrix_of_copies_projects_like_the_dense_qr():

@@ -95,7 +95,8 @@ class BarrierKKT:
         data = A.data
         self.s = s = data[layout.slack]
         j_in_data = data[layout.in_take]
-        self._rows = rows = layout.signed_rows(j_in_data)
+        rows, (stacked_indices, stacked_indptr) = layout.signed_rows(j_in_data)
+        self._rows = rows
         large = np.abs(s) >= threshold
         self._small = small = np.flatnonzero(~large)
         #: 1/s on the eliminated rows, 0 on the others (whose rows the dense system keeps)
@@ -106,9 +107,8 @@ class BarrierKKT:
         eq_data = data[layout.eq_take]
         self._eq = MatVec(sparse.csr_array((eq_data, layout.eq_indices, layout.eq_indptr), shape=(me, ny)))
         # [J_eq; C]: A's transposed product sums the equality rows' terms, then the inequality rows'
-        indices, indptr = layout.stacked
         stacked = sparse.csr_array(
-            (np.concatenate([eq_data, kept.data]), indices, indptr), shape=(me + rows.n_kept, ny)
+            (np.concatenate([eq_data, kept.data]), stacked_indices, stacked_indptr), shape=(me + rows.n_kept, ny)
         )
         self._stacked, self._stacked_t = MatVec(stacked), MatVec(stacked, transpose=True)
         self._s_small = s[small]
@@ -217,7 +217,10 @@ def _dense_factor(kkt: BarrierKKT, layout, data, j_in_data, kept, weights, small
 
 
 def _reduced_sparse(kkt: BarrierKKT, layout, data, j_in_data, kept, weights, small) -> sparse.csr_array:
-    """The reduced system (the dense one of :func:`_dense_factor`) as a sparse matrix."""
+    """The reduced system (the dense one of :func:`_dense_factor`) as a sparse matrix, symmetric
+    but for rounding (``C^T (w C)`` rounds its two triangles apart, by about 1e-16 relative); the
+    band takes its border's lower block as the upper one's transpose, and each solve is refined
+    against ``A`` itself."""
     ny, me, mi, k = kkt.ny, kkt.me, kkt.mi, len(small)
     scaled = kept.data * weights[kkt._rows.entry_rows]
     weighted = sparse.csr_array((scaled, kept.indices, kept.indptr), shape=kept.shape)
@@ -292,19 +295,19 @@ class _Layout:
         self.in_indptr = np.concatenate([[0], np.cumsum(per_row[me:] - 1)]).astype(A.indptr.dtype)
         self.eq_indices = A.indices[self.eq_take]
         self.eq_indptr = A.indptr[: me + 1].copy()
-        self._signed_rows: SignedRows | None = None
-        #: The structure of ``[J_eq; C]``, ``C`` the rows of ``J_ineq`` kept (:meth:`signed_rows`).
-        self.stacked: tuple[np.ndarray, np.ndarray] = (self.eq_indices, self.eq_indptr)
+        self._signed_rows: tuple[SignedRows, tuple[np.ndarray, np.ndarray]] | None = None
 
-    def signed_rows(self, j_in_data: np.ndarray) -> SignedRows:
-        """``J_ineq``'s rows as signed copies of the rows kept, for its values ``j_in_data``: the
-        last ones found if they still hold."""
-        rows = self._signed_rows
-        if rows is None or not rows.holds(j_in_data):
-            rows = self._signed_rows = SignedRows(self.in_indptr, self.in_indices, j_in_data, self.ny)
+    def signed_rows(self, j_in_data: np.ndarray) -> tuple[SignedRows, tuple[np.ndarray, np.ndarray]]:
+        """``J_ineq``'s rows as signed copies of the rows kept ``C``, for its values ``j_in_data``
+        (the last ones found if they still hold), and the structure ``(indices, indptr)`` of
+        ``[J_eq; C]``."""
+        found = self._signed_rows
+        if found is None or not found[0].holds(j_in_data):
+            rows = SignedRows(self.in_indptr, self.in_indices, j_in_data, self.ny)
             indptr = np.concatenate([self.eq_indptr, rows.indptr[1:] + self.eq_indptr[-1]])
-            self.stacked = (np.concatenate([self.eq_indices, rows.indices]), indptr.astype(self.eq_indptr.dtype))
-        return rows
+            stacked = (np.concatenate([self.eq_indices, rows.indices]), indptr.astype(self.eq_indptr.dtype))
+            found = self._signed_rows = (rows, stacked)
+        return found
 
     def fits(self, A: sparse.csr_array, ny: int) -> bool:
         return (
