@@ -21,6 +21,8 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize._trustregion_constr.canonical_constraint import CanonicalConstraint
 
+from .signed_rows import row_entries
+
 __all__ = ["GatheredCanonical", "canonical_rows"]
 
 
@@ -118,10 +120,7 @@ class _Gather:
         indices = np.concatenate([J.indices for J in jacobians])
 
         def pick(rows):
-            counts = indptr[rows + 1] - indptr[rows]
-            extents = np.zeros(rows.size + 1, dtype=np.intp)
-            np.cumsum(counts, out=extents[1:])
-            take = np.repeat(indptr[rows] - extents[:-1], counts) + np.arange(extents[-1])
+            take, extents = row_entries(indptr, rows)
             return take, indices[take], extents.astype(indices.dtype)
 
         eq_take, eq_indices, eq_indptr = pick(self.eq_rows)

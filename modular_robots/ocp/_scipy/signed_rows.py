@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-__all__ = ["SignedRows"]
+__all__ = ["SignedRows", "row_entries"]
 
 
 class SignedRows:
@@ -49,7 +49,6 @@ class SignedRows:
             kept.append(row)
             waiting.setdefault((columns, values.tobytes()), []).append(len(kept) - 1)
         kept_rows = np.asarray(kept, dtype=np.intp)
-        counts = np.diff(indptr)
         #: Row of the kept matrix ``C`` each row copies, ``(rows,)``, and the sign it copies it with.
         self.source = source
         self.sign = np.where(negated, -1.0, 1.0)
@@ -57,14 +56,14 @@ class SignedRows:
         self.n_kept = len(kept_rows)
         self.paired = self.n_kept < rows
         self.shape = (rows, n_columns)
-        self._take = _entries(indptr, kept_rows)
+        self._take, starts = row_entries(indptr, kept_rows)
         self.indices = indices[self._take]
-        self.indptr = np.concatenate([[0], np.cumsum(counts[kept_rows])]).astype(indptr.dtype)
+        self.indptr = starts.astype(indptr.dtype)
         #: Each kept entry's row in ``C``.
-        self.entry_rows = np.repeat(np.arange(self.n_kept), counts[kept_rows])
+        self.entry_rows = np.repeat(np.arange(self.n_kept), np.diff(starts))
         copies = np.flatnonzero(negated)
-        self._copy_take = _entries(indptr, copies)
-        self._copy_of = self._take[_entries(self.indptr, source[copies])]
+        self._copy_take = row_entries(indptr, copies)[0]
+        self._copy_of = self._take[row_entries(self.indptr, source[copies])[0]]
 
     def holds(self, data: np.ndarray) -> bool:
         """Whether the rows of the structure these were found on, with values ``data``, are still
@@ -91,9 +90,10 @@ class SignedRows:
         return np.bincount(self.source, weights=d, minlength=self.n_kept) if self.paired else d
 
 
-def _entries(indptr: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Positions in a CSR matrix's data of the entries of ``rows``, row after row."""
+def row_entries(indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions in a CSR matrix's data of the entries of ``rows``, row after row, and the
+    ``indptr`` of the matrix of those rows."""
     counts = indptr[rows + 1] - indptr[rows]
     starts = np.zeros(len(rows) + 1, dtype=np.intp)
     np.cumsum(counts, out=starts[1:])
-    return np.repeat(indptr[rows] - starts[:-1], counts) + np.arange(starts[-1], dtype=np.intp)
+    return np.repeat(indptr[rows] - starts[:-1], counts) + np.arange(starts[-1], dtype=np.intp), starts
